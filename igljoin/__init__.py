@@ -1,0 +1,59 @@
+"""igljoin: smooth joining of a flexible guest mesh to a rigid host (GMP 2008, extended).
+
+Quick start
+-----------
+>>> import igljoin
+>>> s = igljoin.phantoms.paper_sample("end_to_end", "equal", resolution=0.4)
+>>> res = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve)
+>>> res.converged
+True
+
+Optional parts (pymeshlab cleanup, polyscope inspection, dask) are imported
+only when used.
+"""
+
+from __future__ import annotations
+
+from . import phantoms
+from .boundary import Curve, boundary_loops, select_curve
+from .errors import (
+    CurveError,
+    IgljoinError,
+    MeshError,
+    MeshReadError,
+    MissingExtraError,
+    OptionsError,
+    SolveError,
+    SpecError,
+    WeldError,
+)
+from .io import read_mesh, write_mesh
+from .join import JoinResult, JoinSolver, join
+from .mesh import Mesh, as_mesh
+from .options import JoinOptions
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Curve",
+    "CurveError",
+    "IgljoinError",
+    "JoinOptions",
+    "JoinResult",
+    "JoinSolver",
+    "Mesh",
+    "MeshError",
+    "MeshReadError",
+    "MissingExtraError",
+    "OptionsError",
+    "SolveError",
+    "SpecError",
+    "WeldError",
+    "as_mesh",
+    "boundary_loops",
+    "join",
+    "phantoms",
+    "read_mesh",
+    "select_curve",
+    "write_mesh",
+]

@@ -1,0 +1,422 @@
+"""Point correspondence between the guest and host curves (paper §4.1).
+
+Each guest curve vertex ``b`` is mapped to the host curve point ``p`` with the
+same normalised arc length (Eq. 1), and each host curve vertex ``q`` is
+mapped to a guest curve point ``a``; unless a guest vertex already lies
+within a small tolerance of ``a``, a new guest vertex is inserted there,
+splitting the boundary triangle. Host curve vertices are therefore hit
+exactly by guest seam vertices.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from .boundary import SelectedCurve, arc_length_parameters, polyline_length
+from .errors import CurveError
+
+__all__ = ["Correspondence", "pair_curves", "correspond", "curve_points_at"]
+
+_FIT_SAMPLES = 128
+
+
+@dataclass(frozen=True)
+class Correspondence:
+    """The refined guest and the hard constraints of the join.
+
+    Attributes
+    ----------
+    V : ndarray, shape (n + k, 3)
+        Rest positions of the refined guest: original vertices first, the
+        ``k`` inserted seam vertices after, in order of insertion.
+    F : ndarray of int64, shape (m', 3)
+        Faces of the refined guest (split boundary triangles replaced by fans).
+    face_parent : ndarray of int64, shape (m',)
+        Original guest face each refined face comes from.
+    n_original : int
+        Number of original guest vertices ``n``.
+    seam : ndarray of int64, shape (s,)
+        Guest seam vertices in curve order (indices into ``V``).
+    targets : ndarray, shape (s, 3)
+        Where each seam vertex must go on the host curve.
+    seam_t : ndarray, shape (s,)
+        Normalised arc-length parameter of each seam vertex.
+    host_hit : ndarray of int64, shape (h,)
+        For each host curve vertex, the position in ``seam`` of the guest
+        vertex that lands on it exactly.
+    host_edge : ndarray of int64, shape (s,)
+        For each seam vertex, the host curve segment it lands on (segment
+        ``j`` joins host curve vertices ``j`` and ``j + 1``).
+    host_edge_t : ndarray, shape (s,)
+        Position within that segment, in ``[0, 1)``.
+    inserted_from : ndarray of int64, shape (k, 2)
+        Guest edge (original vertex ids) each inserted vertex splits.
+    inserted_t : ndarray, shape (k,)
+        Position of each inserted vertex along that edge, in ``(0, 1)``.
+    """
+
+    V: np.ndarray
+    F: np.ndarray
+    face_parent: np.ndarray
+    n_original: int
+    seam: np.ndarray
+    targets: np.ndarray
+    seam_t: np.ndarray
+    host_hit: np.ndarray
+    host_edge: np.ndarray
+    host_edge_t: np.ndarray
+    inserted_from: np.ndarray
+    inserted_t: np.ndarray
+
+
+def curve_points_at(P: np.ndarray, t_vertices: np.ndarray, t: np.ndarray, closed: bool):
+    """Points of a polyline at normalised arc-length parameters.
+
+    Parameters
+    ----------
+    P : ndarray, shape (k, 3)
+        Polyline vertices.
+    t_vertices : ndarray, shape (k,)
+        Their parameters (from :func:`arc_length_parameters`).
+    t : ndarray, shape (q,)
+        Query parameters in ``[0, 1]``.
+    closed : bool
+
+    Returns
+    -------
+    points : ndarray, shape (q, 3)
+    segment : ndarray of int64, shape (q,)
+        Segment index ``j`` (from vertex ``j`` to ``j + 1``, wrapping when closed).
+    frac : ndarray, shape (q,)
+        Position within the segment in ``[0, 1)``.
+    """
+    k = len(P)
+    ends = np.append(t_vertices, 1.0) if closed else t_vertices
+    nseg = k if closed else k - 1
+    seg = np.clip(np.searchsorted(ends, t, side="right") - 1, 0, nseg - 1)
+    t0, t1 = ends[seg], ends[seg + 1]
+    span = np.where(t1 > t0, t1 - t0, 1.0)
+    frac = np.clip((t - t0) / span, 0.0, 1.0)
+    nxt = (seg + 1) % k
+    points = P[seg] * (1.0 - frac)[:, None] + P[nxt] * frac[:, None]
+    # a parameter that falls on the segment's far end belongs to the next segment
+    wrap = frac >= 1.0
+    if wrap.any():
+        seg = seg.copy()
+        frac = frac.copy()
+        seg[wrap] = nxt[wrap] if closed else seg[wrap]
+        frac[wrap] = 0.0 if closed else 1.0
+    return points, seg, frac
+
+
+def _resample(P: np.ndarray, closed: bool, n: int) -> np.ndarray:
+    t, _ = arc_length_parameters(P, closed)
+    q = np.arange(n) / n if closed else np.linspace(0.0, 1.0, n)
+    return curve_points_at(P, t, q, closed)[0]
+
+
+def _rigid_residuals(X: np.ndarray, Ys: np.ndarray) -> np.ndarray:
+    """Procrustes residual (proper rotation) of each ``Ys[i]`` fitted onto ``X``.
+
+    Both are centred and scaled to unit RMS radius, so curves of different
+    lengths compare by shape. ``X`` has shape (s, 3), ``Ys`` (c, s, 3).
+    """
+    X = X - X.mean(axis=0)
+    X = X / max(np.sqrt((X**2).sum() / len(X)), 1e-300)
+    Ys = Ys - Ys.mean(axis=1, keepdims=True)
+    Ys = Ys / np.maximum(np.sqrt((Ys**2).sum(axis=(1, 2)) / Ys.shape[1]), 1e-300)[:, None, None]
+    H = np.einsum("csi,sj->cij", Ys, X)
+    sv = np.linalg.svd(H, compute_uv=False)
+    det = np.sign(np.linalg.det(H))
+    trace = sv[:, 0] + sv[:, 1] + det * sv[:, 2]
+    return (X**2).sum() + (Ys**2).sum(axis=(1, 2)) - 2.0 * trace
+
+
+def _best_start(X: np.ndarray, Vg: np.ndarray, g: SelectedCurve, fixed: bool):
+    """Best rigid-fit start vertex of the closed guest curve ``g`` against samples ``X``.
+
+    Coarse search: cyclic shifts of one resampling of the guest curve; then the
+    guest vertices nearest the best shift (in arc length) are compared exactly.
+    Returns ``(residual, shift, g)`` with ``shift`` a vertex offset along ``g``.
+    """
+    k = len(g.indices)
+    if fixed:
+        Y = _resample(Vg[g.indices], True, _FIT_SAMPLES)[None]
+        return float(_rigid_residuals(X, Y)[0]), 0, g
+    Y = _resample(Vg[g.indices], True, _FIT_SAMPLES)
+    rolls = np.stack([np.roll(Y, -j, axis=0) for j in range(_FIT_SAMPLES)])
+    best = _first_minimum(_rigid_residuals(X, rolls))
+    t, _ = arc_length_parameters(Vg[g.indices], True)
+    near = int(np.argmin(np.abs(((t - best / _FIT_SAMPLES) + 0.5) % 1.0 - 0.5)))
+    shifts = (near + np.arange(-3, 4)) % k
+    Ys = np.stack([_resample(Vg[np.roll(g.indices, -j)], True, _FIT_SAMPLES) for j in shifts])
+    res = _rigid_residuals(X, Ys)
+    j = _first_minimum(res)
+    return float(res[j]), int(shifts[j]), g
+
+
+def _first_minimum(values: np.ndarray) -> int:
+    """Index of the first value within rounding of the minimum.
+
+    Symmetric curves (an ellipse fits itself after half a turn) tie up to
+    rounding; taking the first of the tied candidates keeps the choice the same
+    when the inputs are moved rigidly.
+    """
+    low = float(values.min())
+    return int(np.flatnonzero(values <= low + 1e-9 * max(abs(low), 1.0))[0])
+
+
+def pair_curves(
+    Vh: np.ndarray,
+    host: SelectedCurve,
+    Vg: np.ndarray,
+    guest: SelectedCurve,
+    *,
+    guest_start_given: bool,
+) -> tuple[SelectedCurve, SelectedCurve, dict]:
+    """Orient the two curves and choose the guest's start.
+
+    For closed curves the guest runs against the host's face-induced
+    direction, so that the welded result is consistently oriented. When no
+    guest start was given, the start is the one whose resampled curve fits
+    the host curve best by a rigid motion (independent of where the guest
+    happens to be placed).
+
+    Parameters
+    ----------
+    Vh, Vg : ndarray, shape (n_h, 3), (n_g, 3)
+        Host and guest vertices.
+    host, guest : SelectedCurve
+    guest_start_given : bool
+        Keep the guest's first vertex as its start.
+
+    Returns
+    -------
+    host, guest : SelectedCurve
+        Paired curves: guest vertex 0 corresponds to host vertex 0.
+    info : dict
+        ``fit_residual`` (best normalised residual), ``reverse_fit_residual``
+        (the best residual had the guest run the other way).
+    """
+    if host.closed != guest.closed:
+        kinds = {True: "closed", False: "open"}
+        raise CurveError(
+            f"host_curve is {kinds[host.closed]} but guest_curve is {kinds[guest.closed]}; "
+            "both curves must be closed loops or both open paths (give start and end on both)"
+        )
+    for name, V, c in (("host_curve", Vh, host), ("guest_curve", Vg, guest)):
+        if polyline_length(V[c.indices], c.closed) <= 0.0:
+            raise CurveError(
+                f"{name} has length zero (its vertices coincide); remove duplicate vertices "
+                "(igljoin.clean) or pick another curve"
+            )
+    info: dict = {}
+    if not host.closed:
+        return host, guest, info
+    if guest.forward == host.forward:
+        guest = guest.reversed()
+    X = _resample(Vh[host.indices], True, _FIT_SAMPLES)
+    candidates = {}
+    for label, g in (("paired", guest), ("reverse", guest.reversed())):
+        candidates[label] = _best_start(X, Vg, g, fixed=guest_start_given)
+    residual, shift, guest = candidates["paired"]
+    info["fit_residual"] = residual
+    info["reverse_fit_residual"] = candidates["reverse"][0]
+    return host, guest.rolled(shift), info
+
+
+def correspond(
+    Vg: np.ndarray,
+    Fg: np.ndarray,
+    guest: SelectedCurve,
+    Vh: np.ndarray,
+    host: SelectedCurve,
+    *,
+    snap_tolerance: float = 0.1,
+) -> Correspondence:
+    """Map the curves onto each other and insert host points into the guest.
+
+    Parameters
+    ----------
+    Vg : ndarray, shape (n, 3)
+    Fg : ndarray of int64, shape (m, 3)
+        Guest mesh.
+    guest : SelectedCurve
+        Guest curve, paired with ``host`` by :func:`pair_curves`.
+    Vh : ndarray, shape (n_h, 3)
+        Host vertices.
+    host : SelectedCurve
+    snap_tolerance : float
+        A host point whose image on the guest curve is within this fraction
+        of the local guest edge length of an existing guest vertex is
+        matched to that vertex instead of inserting a new one.
+
+    Returns
+    -------
+    Correspondence
+    """
+    closed = host.closed
+    U = guest.indices
+    P_u = Vg[U]
+    P_v = Vh[host.indices]
+    t_u, _ = arc_length_parameters(P_u, closed)
+    t_v, _ = arc_length_parameters(P_v, closed)
+    n_u, n_v = len(U), len(host.indices)
+
+    # host vertex j lands on the guest curve at t_v[j]: nearest guest vertex in parameter space
+    ends_u = np.append(t_u, 1.0) if closed else t_u
+    seg = np.clip(np.searchsorted(ends_u, t_v, side="right") - 1, 0, len(ends_u) - 2)
+    seg_len = ends_u[seg + 1] - ends_u[seg]
+    frac = np.where(seg_len > 0, (t_v - ends_u[seg]) / np.where(seg_len > 0, seg_len, 1.0), 0.0)
+    near = np.where(frac < 0.5, seg, seg + 1)
+    near_dist = np.minimum(frac, 1.0 - frac)
+    if closed:
+        near = near % n_u
+    snap = near_dist <= snap_tolerance
+    if not closed:
+        snap[0] = snap[-1] = True  # start meets start and end meets end
+        near[0], near[-1] = 0, n_u - 1
+    # at most one host vertex per guest vertex: keep the closest, insert the others
+    order = np.lexsort((near_dist, near))
+    dup = np.zeros(n_v, dtype=bool)
+    ns = near[order]
+    dup[order[1:]] = (ns[1:] == ns[:-1]) & snap[order[1:]] & snap[order[:-1]]
+    if not closed:
+        dup[[0, n_v - 1]] = False
+    snap &= ~dup
+    # guest vertex snapped to a host vertex -> exact target
+    guest_hit = np.full(n_u, -1, dtype=np.int64)
+    guest_hit[near[snap]] = np.flatnonzero(snap)
+
+    insert = np.flatnonzero(~snap)
+    ins_seg = seg[insert]
+    ins_frac = np.clip(frac[insert], 1e-9, 1.0 - 1e-9)
+
+    # merged seam: original guest curve vertices and inserted ones, sorted by parameter
+    t_all = np.concatenate([t_u, t_v[insert]])
+    n0 = len(Vg)
+    ids = np.concatenate([U, n0 + np.arange(insert.size)])
+    order = np.argsort(t_all, kind="stable")
+    seam = ids[order]
+    seam_t = t_all[order]
+
+    # targets: host vertices hit exactly; other guest vertices at their arc-length image
+    host_of = np.concatenate([guest_hit, insert])[order]
+    targets, h_edge, h_frac = curve_points_at(P_v, t_v, seam_t, closed)
+    exact = host_of >= 0
+    targets[exact] = P_v[host_of[exact]]
+    h_edge[exact] = host_of[exact]
+    h_frac[exact] = 0.0
+    if not closed:
+        last = h_edge == n_v - 1
+        h_edge[last], h_frac[last] = n_v - 2, 1.0
+    host_hit = np.empty(n_v, dtype=np.int64)
+    host_hit[host_of[exact]] = np.flatnonzero(exact)
+
+    a = U[ins_seg]
+    b = U[(ins_seg + 1) % n_u]
+    new_V = Vg[a] * (1.0 - ins_frac)[:, None] + Vg[b] * ins_frac[:, None]
+    V = np.vstack([Vg, new_V])
+    F, parent = _split_boundary_faces(Fg, a, b, ins_frac, n0)
+    return Correspondence(
+        V=V,
+        F=F,
+        face_parent=parent,
+        n_original=n0,
+        seam=seam,
+        targets=targets,
+        seam_t=seam_t,
+        host_hit=host_hit,
+        host_edge=h_edge,
+        host_edge_t=h_frac,
+        inserted_from=np.stack([a, b], axis=1) if insert.size else np.zeros((0, 2), np.int64),
+        inserted_t=ins_frac,
+    )
+
+
+def _split_boundary_faces(F, a, b, frac, n0):
+    """Replace each boundary face whose edge (a, b) received new vertices by a fan.
+
+    Parameters
+    ----------
+    F : ndarray of int64, shape (m, 3)
+    a, b : ndarray of int64, shape (k,)
+        Guest edge split by each inserted vertex ``n0 + i``.
+    frac : ndarray, shape (k,)
+        Position of each inserted vertex from ``a`` to ``b``.
+    n0 : int
+        Number of original vertices.
+
+    Returns
+    -------
+    F : ndarray of int64, shape (m + k, 3)
+    parent : ndarray of int64, shape (m + k,)
+    """
+    m = len(F)
+    parent = np.arange(m, dtype=np.int64)
+    if a.size == 0:
+        return F.copy(), parent
+    n = int(max(F.max(), a.max(), b.max())) + 1
+    # directed edges of all faces: edge e of face f goes F[f, e] -> F[f, (e + 1) % 3]
+    src = F.reshape(-1)
+    dst = F[:, [1, 2, 0]].reshape(-1)
+    key = src * n + dst
+    order = np.argsort(key)
+    skey = key[order]
+
+    def find(u, v):
+        q = u * n + v
+        pos = np.clip(np.searchsorted(skey, q), 0, len(skey) - 1)
+        hit = skey[pos] == q
+        return np.where(hit, order[pos], -1)
+
+    fwd = find(a, b)
+    bwd = find(b, a)
+    if ((fwd < 0) & (bwd < 0)).any():
+        raise CurveError(
+            "guest_curve: a curve edge belongs to no face; the curve must follow mesh edges"
+        )
+    # group inserted vertices by the half-edge they split, ordered along it
+    he = np.where(fwd >= 0, fwd, bwd)
+    along = np.where(fwd >= 0, frac, 1.0 - frac)
+    grp = np.lexsort((along, he))
+    he_sorted = he[grp]
+    starts = np.flatnonzero(np.r_[True, he_sorted[1:] != he_sorted[:-1]])
+    stops = np.r_[starts[1:], len(grp)]
+    # faces are replaced one split edge at a time; a face with two split edges
+    # is split again inside the fan made for the first (seam-sized loop)
+    faces: dict[int, tuple[int, int, int]] = {}
+    face_parent: dict[int, int] = {}
+    owner: dict[tuple[int, int], int] = {}
+
+    keys = itertools.count()
+
+    def add(tri, par):
+        key = next(keys)
+        faces[key] = tri
+        face_parent[key] = par
+        for e in range(3):
+            owner[(tri[e], tri[(e + 1) % 3])] = key
+
+    touched = np.unique(he_sorted[starts] // 3)
+    for f in touched:
+        add(tuple(int(x) for x in F[f]), int(f))
+    for s0, s1 in zip(starts, stops):
+        f, e = divmod(int(he_sorted[s0]), 3)
+        u, v = int(F[f, e]), int(F[f, (e + 1) % 3])
+        key = owner[(u, v)]
+        tri = faces.pop(key)
+        par = face_parent.pop(key)
+        r = tri.index(u)
+        w = tri[(r + 2) % 3]
+        chain = [u, *(n0 + grp[s0:s1]).tolist(), v]
+        for p, q in zip(chain[:-1], chain[1:]):
+            add((p, q, w), par)
+    keep = np.ones(m, dtype=bool)
+    keep[touched] = False
+    new_F = np.array(list(faces.values()), dtype=np.int64).reshape(-1, 3)
+    new_parent = np.array(list(face_parent.values()), dtype=np.int64)
+    return np.vstack([F[keep], new_F]), np.concatenate([parent[keep], new_parent])

@@ -1,0 +1,214 @@
+"""The validated triangle mesh type and the checks a joinable mesh must pass."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .errors import MeshError
+
+__all__ = ["Mesh", "as_mesh", "MAX_ELEMENTS"]
+
+#: Default guard on mesh size (vertices or faces); larger meshes are refused
+#: with a clear error before memory runs out. Change with ``igljoin.mesh.MAX_ELEMENTS``.
+MAX_ELEMENTS = 20_000_000
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    """A C-ordered read-only copy (the caller's array and its flags stay untouched)."""
+    if not a.flags.writeable and a.flags.c_contiguous:
+        return a
+    a = np.array(a, order="C", copy=True)
+    a.flags.writeable = False
+    return a
+
+
+def _vertices(V: Any, name: str) -> np.ndarray:
+    try:
+        V = np.asarray(V, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise MeshError(
+            f"{name}: vertex array V cannot be converted to float64 ({exc}); "
+            "pass an (n, 3) array of coordinates"
+        ) from None
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise MeshError(
+            f"{name}: vertex array V has shape {V.shape}; it must be (n, 3) "
+            "(one row of x, y, z per vertex)"
+        )
+    if V.shape[0] > MAX_ELEMENTS:
+        raise MeshError(
+            f"{name}: {V.shape[0]:,} vertices exceed the size guard of {MAX_ELEMENTS:,}; "
+            "decimate the mesh or raise igljoin.mesh.MAX_ELEMENTS"
+        )
+    bad = ~np.isfinite(V).all(axis=1)
+    if bad.any():
+        idx = np.flatnonzero(bad)
+        raise MeshError(
+            f"{name}: {idx.size} vertices have NaN or infinite coordinates "
+            f"(first: {idx[:5].tolist()}); remove or repair them before joining"
+        )
+    return V
+
+
+def _faces(F: Any, n: int, name: str) -> np.ndarray:
+    try:
+        Fa = np.asarray(F)
+    except (TypeError, ValueError) as exc:
+        raise MeshError(
+            f"{name}: face array F cannot be read ({exc}); pass an (m, 3) int array"
+        ) from None
+    if Fa.size == 0:
+        raise MeshError(f"{name}: the mesh has no faces; pass at least one triangle in F")
+    if Fa.ndim != 2 or Fa.shape[1] != 3:
+        raise MeshError(
+            f"{name}: face array F has shape {Fa.shape}; it must be (m, 3) "
+            "(triangles; triangulate polygons first)"
+        )
+    if Fa.shape[0] > MAX_ELEMENTS:
+        raise MeshError(
+            f"{name}: {Fa.shape[0]:,} faces exceed the size guard of {MAX_ELEMENTS:,}; "
+            "decimate the mesh or raise igljoin.mesh.MAX_ELEMENTS"
+        )
+    if not np.issubdtype(Fa.dtype, np.integer):
+        if (
+            np.issubdtype(Fa.dtype, np.floating)
+            and np.isfinite(Fa).all()
+            and (Fa == np.round(Fa)).all()
+        ):
+            Fa = Fa.astype(np.int64)
+        else:
+            raise MeshError(
+                f"{name}: face array F has dtype {Fa.dtype}; it must hold integer vertex indices"
+            )
+    Fa = Fa.astype(np.int64, copy=False)
+    lo, hi = int(Fa.min()), int(Fa.max())
+    if lo < 0 or hi >= n:
+        raise MeshError(
+            f"{name}: face indices range over [{lo}, {hi}] but there are {n} vertices; "
+            f"every index must be in [0, {n - 1}] (indices are 0-based)"
+        )
+    return Fa
+
+
+def _attributes(attrs: Mapping[str, Any] | None, count: int, kind: str, name: str) -> dict:
+    out: dict[str, np.ndarray] = {}
+    for key, value in (attrs or {}).items():
+        a = np.asarray(value)
+        if a.shape[:1] != (count,):
+            raise MeshError(
+                f"{name}: {kind} attribute '{key}' has shape {a.shape}; it needs one value "
+                f"per {kind} ({count})"
+            )
+        if not key.isidentifier():
+            raise MeshError(
+                f"{name}: attribute name {key!r} is not a plain identifier; use letters, "
+                "digits and underscores"
+            )
+        out[str(key)] = _readonly(a)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """A triangle mesh with validated, read-only arrays.
+
+    Parameters
+    ----------
+    V : array_like, shape (n, 3)
+        Vertex coordinates, converted to float64. Must be finite.
+    F : array_like, shape (m, 3)
+        Triangle vertex indices, converted to int64, each in ``[0, n)``.
+    vertex_attributes : mapping of str to array_like, shape (n, ...), optional
+        Per-vertex scalar or vector data (written to PLY).
+    face_attributes : mapping of str to array_like, shape (m, ...), optional
+        Per-face data.
+    name : str, optional
+        Used in error messages.
+
+    Notes
+    -----
+    Structural validity only (shapes, finiteness, index range). Topological
+    requirements for joining (no degenerate faces, edge-manifold, ...) are
+    checked where a mesh is joined, so that broken meshes can still be read,
+    inspected and cleaned.
+
+    Examples
+    --------
+    >>> import numpy as np, igljoin
+    >>> m = igljoin.Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    >>> m.V.shape, m.F.dtype
+    ((3, 3), dtype('int64'))
+    """
+
+    V: np.ndarray
+    F: np.ndarray
+    vertex_attributes: dict = field(default_factory=dict)
+    face_attributes: dict = field(default_factory=dict)
+    name: str = "mesh"
+
+    def __post_init__(self) -> None:
+        V = _vertices(self.V, self.name)
+        F = _faces(self.F, V.shape[0], self.name)
+        object.__setattr__(self, "V", _readonly(V))
+        object.__setattr__(self, "F", _readonly(F))
+        object.__setattr__(
+            self,
+            "vertex_attributes",
+            _attributes(self.vertex_attributes, V.shape[0], "vertex", self.name),
+        )
+        object.__setattr__(
+            self,
+            "face_attributes",
+            _attributes(self.face_attributes, F.shape[0], "face", self.name),
+        )
+
+    @property
+    def n_vertices(self) -> int:
+        """Number of vertices ``n``."""
+        return int(self.V.shape[0])
+
+    @property
+    def n_faces(self) -> int:
+        """Number of faces ``m``."""
+        return int(self.F.shape[0])
+
+    def with_attributes(self, vertex: Mapping | None = None, face: Mapping | None = None) -> Mesh:
+        """Return a copy with extra attributes merged in (same geometry)."""
+        return Mesh(
+            self.V,
+            self.F,
+            {**self.vertex_attributes, **(vertex or {})},
+            {**self.face_attributes, **(face or {})},
+            name=self.name,
+        )
+
+    def __repr__(self) -> str:
+        return f"Mesh(name={self.name!r}, n_vertices={self.n_vertices}, n_faces={self.n_faces})"
+
+
+def as_mesh(obj: Any, name: str = "mesh") -> Mesh:
+    """Accept a :class:`Mesh` or a ``(V, F)`` tuple and return a :class:`Mesh`.
+
+    Parameters
+    ----------
+    obj : Mesh or tuple of (array_like (n, 3), array_like (m, 3))
+        The mesh.
+    name : str
+        Argument name used in error messages.
+
+    Returns
+    -------
+    Mesh
+    """
+    if isinstance(obj, Mesh):
+        return obj
+    if isinstance(obj, (tuple, list)) and len(obj) == 2:
+        return Mesh(obj[0], obj[1], name=name)
+    raise MeshError(
+        f"{name}: expected an igljoin.Mesh or a (V, F) tuple, got {type(obj).__name__}; "
+        "read a file with igljoin.read_mesh(path) or pass (V, F) arrays"
+    )

@@ -1,0 +1,198 @@
+"""Options of a join: one frozen dataclass with documented defaults."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from .errors import OptionsError
+
+__all__ = ["JoinOptions"]
+
+
+@dataclass(frozen=True)
+class JoinOptions:
+    """Weights and solver settings of a join.
+
+    Parameters
+    ----------
+    smooth : bool
+        Include the smooth-join term (paper §4.4). ``False`` gives the
+        paper's "without smooth join" variant.
+    shape_weight : float
+        ``w_L``, weight of the Laplacian shape term (Eq. 4).
+    stretch_weight : float
+        Multiplier of the stiffness ``k_ij`` of the stretch term (Eq. 5–6).
+    smooth_weight : float
+        ``w_J``, weight of the smooth-join term (Eq. 7).
+    smooth_mode : {"robust", "paper"}
+        ``"paper"`` pulls one tangential point per seam vertex to a fixed
+        target (Eq. 7 literally); ``"robust"`` (default) pulls every
+        cross-seam edge into the host's tangent plane continued across the
+        seam, re-projecting the current edge at each iteration.
+    smooth_radius : float
+        Host tangent planes: 0 (default) takes them from the faces at each
+        host curve vertex, as the paper does; a positive value fits a
+        quadric to the host vertices within that many mean host seam edges
+        instead, which follows the underlying surface rather than its noise.
+    smooth_tolerance : float, optional
+        Robust mode: crease in degrees below which a cross-seam edge is left
+        alone. ``None`` (default) is 0 with one-ring tangent planes and, with
+        ``smooth_radius > 0``, the host's own normal noise (median angle
+        between its one-ring and fitted cross-seam directions), so the join
+        does not chase scan noise.
+    laplacian : {"uniform", "cotangent"}
+        Laplacian weights; uniform (``1/|N(p)|``) as in the paper.
+    rotation_aware : bool
+        Rotate Laplacian coordinates by per-vertex rotations fitted in the
+        local step, so a guest that arrives rotated is not penalised.
+        ``False`` is the paper's fixed Laplacian.
+    stiffness : array_like, shape (n,) or (m,), optional
+        Relative stiffness ``k_ij`` (1 = default tissue) per guest vertex or
+        face; edges take the mean of their vertices or faces.
+    stiffness_on : {"auto", "vertex", "face"}
+        Whether ``stiffness`` is per vertex or per face (``"auto"`` decides
+        by its length; required when the guest has as many faces as vertices).
+    max_iterations : int
+        Upper bound on local/global iterations.
+    tolerance : float
+        Relative energy change (and step, in mean edge lengths) below which
+        the iteration has converged.
+    time_limit : float, optional
+        Seconds after which the solve returns its current, non-converged result.
+    snap_tolerance : float
+        Host points closer than this fraction of a guest edge to a guest
+        vertex (in arc length) are matched to it instead of being inserted.
+    initial_guess : {"extend", "rigid"}
+        Start from the rigidly aligned guest with the seam displacement
+        smoothly extended (default), or from the rigidly aligned guest alone.
+    acceleration : int
+        Anderson acceleration history length of the local/global iteration
+        (0 = plain iteration). Accelerated steps that increase the
+        fixed-point residual are rejected, so results match the plain iteration.
+    """
+
+    smooth: bool = True
+    shape_weight: float = 1.0
+    stretch_weight: float = 1.0
+    smooth_weight: float = 10.0
+    smooth_mode: str = "robust"
+    smooth_radius: float = 0.0
+    smooth_tolerance: float | None = None
+    laplacian: str = "uniform"
+    rotation_aware: bool = True
+    stiffness: Any = None
+    stiffness_on: str = "auto"
+    max_iterations: int = 500
+    tolerance: float = 1e-4
+    time_limit: float | None = None
+    snap_tolerance: float = 0.1
+    initial_guess: str = "extend"
+    acceleration: int = 5
+
+    def __post_init__(self) -> None:
+        for name in ("shape_weight", "stretch_weight", "smooth_weight", "smooth_radius"):
+            self._number(name, low=0.0)
+        if self.shape_weight == 0 and self.stretch_weight == 0:
+            raise OptionsError(
+                "shape_weight and stretch_weight are both 0: nothing holds the guest's shape; "
+                "make at least one positive"
+            )
+        self._number("tolerance", low=0.0, strict=True)
+        self._number("snap_tolerance", low=0.0)
+        if self.snap_tolerance >= 0.5:
+            raise OptionsError(
+                f"snap_tolerance={self.snap_tolerance} must be below 0.5 (a fraction of a guest "
+                "edge); try the default 0.1"
+            )
+        if self.smooth_tolerance is not None:
+            self._number("smooth_tolerance", low=0.0)
+            if self.smooth_tolerance >= 90.0:
+                raise OptionsError(
+                    f"smooth_tolerance={self.smooth_tolerance} must be below 90 degrees; "
+                    "leave it unset for the automatic value"
+                )
+        if self.time_limit is not None:
+            self._number("time_limit", low=0.0, strict=True)
+        acc = self.acceleration
+        if isinstance(acc, bool) or not isinstance(acc, (int, np.integer)) or not 0 <= acc <= 50:
+            raise OptionsError(f"acceleration={acc!r} must be an integer from 0 to 50 (default 5)")
+        it = self.max_iterations
+        if isinstance(it, bool) or not isinstance(it, (int, np.integer)) or it < 1:
+            raise OptionsError(
+                f"max_iterations={it!r} must be a positive integer (the default is 500)"
+            )
+        for name, allowed in (
+            ("smooth_mode", ("robust", "paper")),
+            ("laplacian", ("uniform", "cotangent")),
+            ("stiffness_on", ("auto", "vertex", "face")),
+            ("initial_guess", ("extend", "rigid")),
+        ):
+            if getattr(self, name) not in allowed:
+                raise OptionsError(
+                    f"{name}={getattr(self, name)!r} is not one of {', '.join(map(repr, allowed))}"
+                )
+        for name in ("smooth", "rotation_aware"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise OptionsError(f"{name}={getattr(self, name)!r} must be True or False")
+        if self.stiffness is not None:
+            k = np.asarray(self.stiffness, dtype=np.float64)
+            if k.ndim != 1 or not np.isfinite(k).all() or (k <= 0).any():
+                raise OptionsError(
+                    "stiffness must be a 1-D array of positive finite numbers (one per guest "
+                    "vertex or face, 1 = default tissue)"
+                )
+            object.__setattr__(self, "stiffness", k)
+
+    def _number(self, name: str, low: float, strict: bool = False) -> None:
+        value = getattr(self, name)
+        ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
+            value, bool
+        )
+        if ok:
+            value = float(value)
+            ok = np.isfinite(value) and (value > low if strict else value >= low)
+        if not ok:
+            bound = f"> {low:g}" if strict else f">= {low:g}"
+            default = next(f.default for f in fields(self) if f.name == name)
+            raise OptionsError(
+                f"{name}={getattr(self, name)!r} is out of range; it must be a finite number "
+                f"{bound} (the default is {default})"
+            )
+        object.__setattr__(self, name, value)
+
+    @classmethod
+    def make(cls, options: JoinOptions | dict | None = None, **overrides: Any) -> JoinOptions:
+        """Build options from an instance or mapping plus keyword overrides."""
+        names = {f.name for f in fields(cls)}
+        base = (
+            {}
+            if options is None
+            else (
+                dataclasses.asdict(options) if isinstance(options, JoinOptions) else dict(options)
+            )
+        )
+        merged = {**base, **overrides}
+        unknown = sorted(set(merged) - names)
+        if unknown:
+            raise OptionsError(
+                f"unknown join options {unknown}; valid options are {', '.join(sorted(names))}"
+            )
+        return cls(**merged)
+
+    def replace(self, **changes: Any) -> JoinOptions:
+        """A copy with some options changed (validated)."""
+        return JoinOptions.make(self, **changes)
+
+    def to_json(self) -> dict:
+        """Options as plain JSON values (stiffness summarised)."""
+        out = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, np.ndarray):
+                v = {"count": int(v.size), "min": float(v.min()), "max": float(v.max())}
+            out[f.name] = v
+        return out

@@ -1,0 +1,360 @@
+"""Energy terms of the join (paper §4.2–4.4).
+
+A term is a constant sparse operator ``K`` (rows × n), a weight per row and a
+``target(X)`` that the local step recomputes; its energy is
+``Σ_r w_r ‖(K X)_r − target_r‖²``. The solver only sees these three things,
+so adding a term never touches the solver.
+
+* :class:`ShapeTerm` — Laplacian coordinates (Eq. 3–4), rotated per vertex by
+  a rotation fitted in the local step (rotation-aware), or fixed as in the
+  paper.
+* :class:`StretchTerm` — edge lengths kept with stiffness ``k_ij`` (Eq. 5–6).
+* :class:`SmoothJoinTerm` — the guest leaves the seam along the host surface
+  continued across it (Eq. 7): the paper's tangential-point form, or a robust
+  form acting on every cross-seam edge.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+
+import igl
+import numpy as np
+import scipy.sparse as sp
+
+from .frames import SeamFrames, face_normals_areas, unit, vertex_face_matrix
+
+#: Weight ``μ`` of the one-ring edges in the rotation-aware shape term, relative to
+#: the Laplacian. Small: it only fixes the rotations and makes them exact minimisers.
+ROTATION_REGULARISATION = 0.1
+
+__all__ = [
+    "Term",
+    "LocalState",
+    "ShapeTerm",
+    "StretchTerm",
+    "SmoothJoinTerm",
+    "unique_edges",
+    "edge_stiffness",
+]
+
+
+@dataclass
+class LocalState:
+    """What the local step shares between terms for one iterate ``X`` (n, 3)."""
+
+    X: np.ndarray
+    rotations: np.ndarray | None = None
+    cache: dict = field(default_factory=dict)
+
+
+class Term(ABC):
+    """One quadratic-in-X energy term with a recomputed target."""
+
+    name: str
+    K: sp.csr_matrix
+    weights: np.ndarray
+
+    @abstractmethod
+    def target(self, state: LocalState) -> np.ndarray:
+        """Target of ``K X``, shape (rows, 3), for the current iterate."""
+
+    @property
+    def rows(self) -> int:
+        """Number of rows of ``K``."""
+        return int(self.K.shape[0])
+
+    @property
+    def soft_rows(self) -> int:
+        """Soft constraints per coordinate, counted as the paper counts them."""
+        return self.rows
+
+    def applied(self, state: LocalState) -> np.ndarray:
+        """``K X`` at ``state.X``, shape (rows, 3), computed once per local step."""
+        key = id(self)
+        if key not in state.cache:
+            state.cache[key] = self.K @ state.X
+        return state.cache[key]
+
+    def energy(self, state: LocalState, target: np.ndarray | None = None) -> float:
+        """``Σ w ‖K X − target‖²`` at ``state.X``."""
+        t = self.target(state) if target is None else target
+        r = self.applied(state) - t
+        return float(np.dot(self.weights, np.einsum("ij,ij->i", r, r)))
+
+
+def unique_edges(F: np.ndarray) -> np.ndarray:
+    """Undirected edges of a triangle mesh, shape (e, 2), each listed once."""
+    return np.asarray(igl.edges(F), dtype=np.int64)
+
+
+def _difference_operator(E: np.ndarray, n: int) -> sp.csr_matrix:
+    e = len(E)
+    rows = np.repeat(np.arange(e), 2)
+    vals = np.tile([1.0, -1.0], e)
+    return sp.csr_matrix((vals, (rows, E.reshape(-1))), shape=(e, n))
+
+
+def edge_stiffness(
+    E: np.ndarray, F: np.ndarray, stiffness: np.ndarray | None, on: str
+) -> np.ndarray:
+    """Per-edge stiffness ``k_ij`` from a per-vertex or per-face array.
+
+    Parameters
+    ----------
+    E : ndarray of int64, shape (e, 2)
+    F : ndarray of int64, shape (m, 3)
+    stiffness : ndarray, shape (n,) or (m,), or None
+        ``None`` gives 1 everywhere.
+    on : {"vertex", "face"}
+
+    Returns
+    -------
+    ndarray, shape (e,)
+        Vertex values: mean of the two endpoints. Face values: mean over the
+        (one or two) faces sharing the edge.
+    """
+    if stiffness is None:
+        return np.ones(len(E))
+    if on == "vertex":
+        return 0.5 * (stiffness[E[:, 0]] + stiffness[E[:, 1]])
+    n = int(max(E.max(), F.max())) + 1
+    key = np.minimum(E[:, 0], E[:, 1]) * n + np.maximum(E[:, 0], E[:, 1])
+    fe = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    fkey = np.minimum(fe[:, 0], fe[:, 1]) * n + np.maximum(fe[:, 0], fe[:, 1])
+    fval = np.tile(stiffness, 3)
+    order = np.argsort(key)
+    pos = order[np.searchsorted(key[order], fkey)]
+    total = np.bincount(pos, weights=fval, minlength=len(E))
+    count = np.bincount(pos, minlength=len(E))
+    return total / np.maximum(count, 1)
+
+
+class ShapeTerm(Term):
+    """Laplacian shape term ``w_L Σ ‖l(p′) − R_i l(p)‖²`` (Eq. 3–4), rotation-aware.
+
+    With ``rotation_aware`` the energy of vertex ``i`` is
+
+    ``w_L (‖l(p′)_i − R_i l(p)_i‖² + μ Σ_j ‖(p′_i − p′_j) − R_i (p_i − p_j)‖²)``
+
+    and ``R_i`` is its exact minimiser over rotations (a weighted Procrustes
+    fit of the Laplacian and the one-ring edges). The small one-ring part
+    (``μ`` = :data:`ROTATION_REGULARISATION`) pins down the rotation about
+    the Laplacian's own axis; because ``R_i`` minimises the very energy
+    being minimised, every local and every global step lowers it, and the
+    iteration settles on a minimum instead of drifting.
+
+    Parameters
+    ----------
+    V0 : ndarray, shape (n, 3)
+        Rest positions.
+    F : ndarray of int64, shape (m, 3)
+    weight : float
+        ``w_L``.
+    laplacian : {"uniform", "cotangent"}
+        Uniform weights ``1/|N(p)|`` as in the paper, or cotangent weights
+        normalised per row.
+    rotation_aware : bool
+        ``False`` keeps the paper's fixed Laplacian coordinates (no rotations).
+    """
+
+    name = "shape"
+
+    def __init__(self, V0, F, weight=1.0, laplacian="uniform", rotation_aware=True):
+        n = len(V0)
+        self.n = n
+        self.E = unique_edges(F)
+        if laplacian == "cotangent":
+            C = -igl.cotmatrix(V0, F).tocsr()
+            diag = C.diagonal()
+            L = sp.diags(1.0 / np.where(diag != 0, diag, 1.0)) @ C
+        else:
+            A = sp.csr_matrix(
+                (np.ones(2 * len(self.E)), (self.E.reshape(-1), self.E[:, ::-1].reshape(-1))),
+                shape=(n, n),
+            )
+            deg = np.asarray(A.sum(axis=1)).ravel()
+            L = sp.eye(n, format="csr") - sp.diags(1.0 / np.maximum(deg, 1.0)) @ A
+        self.L = sp.csr_matrix(L)
+        self.delta = self.L @ V0
+        self.rotation_aware = rotation_aware
+        if not rotation_aware:
+            self.K = self.L
+            self.weights = np.full(n, float(weight))
+            return
+        mu = ROTATION_REGULARISATION
+        ne = len(self.E)
+        D = _difference_operator(self.E, n)
+        # rows: Laplacians, then one-ring edges i->j (owned by i) and j->i (owned by j)
+        self.K = sp.vstack([self.L, D, -D], format="csr")
+        self.weights = np.concatenate([np.full(n, float(weight)), np.full(2 * ne, weight * mu)])
+        self.rest_edges = V0[self.E[:, 0]] - V0[self.E[:, 1]]
+        # covariance operator: (M X)[a*n + v, b] = μ Σ_{edges e at v} e0[e, a] (X_i − X_j)[e, b],
+        # the one-ring part of S_v stacked coordinate-major as libigl's fit_rotations wants
+        incidence = sp.csr_matrix(
+            (np.ones(2 * ne), (self.E.reshape(-1), np.repeat(np.arange(ne), 2))), shape=(n, ne)
+        )
+        self.covariance = mu * sp.vstack(
+            [incidence @ sp.diags(self.rest_edges[:, a]) @ D for a in range(3)], format="csr"
+        )
+
+    @property
+    def soft_rows(self) -> int:
+        """Laplacian constraints only, as the paper counts them."""
+        return self.n
+
+    def rotations(self, X: np.ndarray, LX: np.ndarray) -> np.ndarray:
+        """Per-vertex rotations, shape (n, 3, 3), minimising the vertex energies at ``X``."""
+        S = self.covariance @ X
+        S += np.concatenate([self.delta[:, [a]] * LX for a in range(3)])
+        R = igl.fit_rotations(S, False)
+        return R.reshape(3, -1, 3).transpose(1, 0, 2)
+
+    def target(self, state: LocalState) -> np.ndarray:
+        if not self.rotation_aware:
+            return self.delta
+        KX = self.applied(state)
+        if state.rotations is None:
+            state.rotations = self.rotations(state.X, KX[: self.n])
+        R = state.rotations
+        e0 = self.rest_edges
+        return np.concatenate(
+            [
+                np.einsum("nij,nj->ni", R, self.delta),
+                np.einsum("nij,nj->ni", R[self.E[:, 0]], e0),
+                -np.einsum("nij,nj->ni", R[self.E[:, 1]], e0),
+            ]
+        )
+
+
+class StretchTerm(Term):
+    """Minimum stretching/shrinking ``Σ k_ij ‖d_ij − s_ij‖²`` (Eq. 5–6).
+
+    ``s_ij`` is the current edge direction scaled to the rest length.
+
+    Parameters
+    ----------
+    V0 : ndarray, shape (n, 3)
+    E : ndarray of int64, shape (e, 2)
+    stiffness : ndarray, shape (e,)
+        ``k_ij`` (already multiplied by the stretch weight).
+    """
+
+    name = "stretch"
+
+    def __init__(self, V0, E, stiffness):
+        self.E = E
+        self.K = _difference_operator(E, len(V0))
+        self.weights = np.asarray(stiffness, dtype=np.float64)
+        self.rest = self.K @ V0
+        self.rest_length = np.linalg.norm(self.rest, axis=1)
+
+    def target(self, state: LocalState) -> np.ndarray:
+        d = self.applied(state)
+        length = np.linalg.norm(d, axis=1)
+        ok = length > 1e-12 * np.maximum(self.rest_length, 1e-300)
+        out = np.where(ok[:, None], d * (self.rest_length / np.where(ok, length, 1.0))[:, None], 0)
+        if not ok.all():
+            # a collapsed edge keeps its rest direction (rotated, when rotations are known)
+            bad = np.flatnonzero(~ok)
+            rest = self.rest[bad]
+            if state.rotations is not None:
+                rest = np.einsum("nij,nj->ni", state.rotations[self.E[bad, 0]], rest)
+            out[bad] = rest
+        return out
+
+
+class SmoothJoinTerm(Term):
+    """The guest leaves the seam along the host surface continued (Eq. 7).
+
+    Parameters
+    ----------
+    V0 : ndarray, shape (n, 3)
+        Rest positions of the (refined) guest.
+    F : ndarray of int64, shape (m, 3)
+    seam : ndarray of int64, shape (s,)
+        Guest seam vertices in curve order.
+    frames : SeamFrames
+        Host frames interpolated at each seam vertex's target, shape (s, 3) each.
+    weight : float
+        ``w_J``.
+    mode : {"robust", "paper"}
+        ``"paper"``: for each seam vertex ``b`` its tangential point ``b_t``
+        (the neighbour most parallel to ``n(b) × (b − b₁)``) is pulled to
+        ``b′ + w`` with ``w`` the host's outward cross-seam direction at the
+        rest length ``‖b − b_t‖`` — a fixed target. ``"robust"``: every edge
+        from a seam vertex to a non-seam neighbour is pulled into the
+        half-plane that continues the host surface (the host tangent plane,
+        on the side away from the host); the target is the projection of the
+        current edge onto that half-plane, so no single noisy neighbour or
+        length dictates the result.
+    tolerance : float
+        Robust mode: half-angle in radians of a wedge around the half-plane
+        within which an edge is left alone (0: exact tangent continuity). It
+        keeps the join from flattening what is only noise of the host.
+    """
+
+    name = "smooth"
+
+    def __init__(self, V0, F, seam, frames: SeamFrames, weight=1.0, mode="robust", tolerance=0.0):
+        n = len(V0)
+        self.mode = mode
+        self.tolerance = float(tolerance)
+        on_seam = np.zeros(n, dtype=bool)
+        on_seam[seam] = True
+        E = unique_edges(F)
+        seam_pos = np.full(n, -1, dtype=np.int64)
+        seam_pos[seam] = np.arange(len(seam))
+        # edges from a seam vertex to a free vertex, oriented seam -> free
+        cross = on_seam[E[:, 0]] ^ on_seam[E[:, 1]]
+        Ec = E[cross]
+        Ec = np.where(on_seam[Ec[:, 0]][:, None], Ec, Ec[:, ::-1])
+        if mode == "paper":
+            Ec = self._tangential_points(V0, F, seam, on_seam, Ec)
+        self.pairs = Ec
+        which = seam_pos[Ec[:, 0]]
+        self.normal = frames.normal[which]
+        self.outward = -frames.inward[which]
+        rows = np.repeat(np.arange(len(Ec)), 2)
+        vals = np.tile([-1.0, 1.0], len(Ec))
+        self.K = sp.csr_matrix((vals, (rows, Ec.reshape(-1))), shape=(len(Ec), n))
+        self.weights = np.full(len(Ec), float(weight))
+        rest_len = np.linalg.norm(V0[Ec[:, 1]] - V0[Ec[:, 0]], axis=1)
+        self.fixed_target = self.outward * rest_len[:, None]
+
+    @staticmethod
+    def _tangential_points(V0, F, seam, on_seam, Ec):
+        """One cross-seam edge per seam vertex: the paper's tangential point."""
+        normals, areas = face_normals_areas(V0, F)
+        vn = unit(vertex_face_matrix(F, len(V0))[seam] @ (normals * areas[:, None]))
+        nxt = np.roll(seam, -1)
+        nxt[-1] = seam[-2]  # b₁ is any seam neighbour; this also suits an open curve's end
+        t = unit(np.cross(vn, V0[seam] - V0[nxt]))
+        seam_pos = np.full(len(V0), -1, dtype=np.int64)
+        seam_pos[seam] = np.arange(len(seam))
+        which = seam_pos[Ec[:, 0]]
+        d = unit(V0[Ec[:, 0]] - V0[Ec[:, 1]])
+        score = np.abs(np.einsum("ij,ij->i", d, t[which]))
+        order = np.lexsort((-score, which))
+        first = np.r_[True, which[order][1:] != which[order][:-1]]
+        return Ec[order[first]]
+
+    def target(self, state: LocalState) -> np.ndarray:
+        if self.mode == "paper":
+            return self.fixed_target
+        d = self.applied(state)
+        n = self.normal
+        z = np.einsum("ij,ij->i", d, n)
+        p = d - z[:, None] * n
+        plen = np.linalg.norm(p, axis=1)
+        if self.tolerance == 0.0:
+            return p
+        # project (plen, z) onto the wedge |z| <= tan(alpha) plen: keep d if inside,
+        # else the closest point on the wedge's face
+        ca, sa = np.cos(self.tolerance), np.sin(self.tolerance)
+        inside = np.abs(z) <= np.tan(self.tolerance) * plen
+        s = np.maximum(plen * ca + np.abs(z) * sa, 0.0)
+        u = p / np.where(plen > 0, plen, 1.0)[:, None]
+        face = s[:, None] * (ca * u + (sa * np.sign(z))[:, None] * n)
+        return np.where(inside[:, None], p + z[:, None] * n, face)
