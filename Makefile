@@ -18,6 +18,13 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q
 
+# a long hypothesis run (20,000 examples per fuzz test; make test runs 700 each)
+fuzz: $(STAMP)
+	HYPOTHESIS_PROFILE=fuzz $(PY) -m pytest -q tests/test_fuzz.py --hypothesis-show-statistics
+
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict -d out/site
+
 bench: $(STAMP)
 	$(PY) pipelines/benchmark.py
 

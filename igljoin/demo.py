@@ -145,7 +145,9 @@ def claims(runs: list[SampleRun]) -> list[dict]:
         out.append(
             {
                 "claim": text,
-                "evidence": "; ".join(f"{SCENARIO_TITLES[r.sample.scenario]}: {describe(r)}" for r in rs),
+                "evidence": "; ".join(
+                    f"{SCENARIO_TITLES[r.sample.scenario]}: {describe(r)}" for r in rs
+                ),
                 "confirmed": bool(all(test(r) for r in rs)),
             }
         )
@@ -153,8 +155,17 @@ def claims(runs: list[SampleRun]) -> list[dict]:
 
 
 _COLUMNS = [
-    "scenario", "length", "points", "hard", "soft", "iterations", "time_ms",
-    "seam_gap_rel", "crease_without_deg", "crease_with_deg", "area_change_median_pct",
+    "scenario",
+    "length",
+    "points",
+    "hard",
+    "soft",
+    "iterations",
+    "time_ms",
+    "seam_gap_rel",
+    "crease_without_deg",
+    "crease_with_deg",
+    "area_change_median_pct",
     "area_ratio_total",
 ]
 

@@ -44,12 +44,12 @@ def check_surface(mesh: Mesh, role: str) -> None:
         idx = np.flatnonzero(zero)
         raise MeshError(f"{role}: {idx.size} faces have zero area (first {_first(idx)}); {fix}")
     srt = np.sort(F, axis=1)
-    _, first, count = np.unique(srt, axis=0, return_index=True, return_counts=True)
+    count = np.unique(srt, axis=0, return_counts=True)[1]
     if (count > 1).any():
         raise MeshError(
             f"{role}: {int((count > 1).sum())} faces are duplicated (same three vertices); {fix}"
         )
-    manifold, _, _, _, bad_edges = igl.is_edge_manifold(F)
+    manifold = igl.is_edge_manifold(F)[0]
     if not manifold:
         E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
         uniq, cnt = np.unique(E, axis=0, return_counts=True)
@@ -58,9 +58,26 @@ def check_surface(mesh: Mesh, role: str) -> None:
             f"{role}: {len(bad)} edges are shared by more than two faces (non-manifold; first "
             f"{bad[:3].tolist()}); {fix}"
         )
+    directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    _, dcount = np.unique(directed, axis=0, return_counts=True)
+    if (dcount > 1).any():
+        raise MeshError(
+            f"{role}: {int((dcount > 1).sum())} edges are traversed twice in the same direction "
+            f"(faces inconsistently oriented); {fix} — it orients faces consistently"
+        )
     used = np.zeros(mesh.n_vertices, dtype=bool)
     used[F.reshape(-1)] = True
-    vm = np.asarray(igl.is_vertex_manifold(F), dtype=bool)
+    if role == "guest":
+        pos, inverse = np.unique(mesh.V[used], axis=0, return_inverse=True)
+        if len(pos) < int(used.sum()):
+            dup = np.flatnonzero(used)[np.bincount(inverse.ravel())[inverse.ravel()] > 1]
+            raise MeshError(
+                f"guest: {dup.size} vertices share their position with another vertex "
+                f"(duplicates, first {_first(dup)}); they split the surface into pieces — {fix}"
+            )
+    vm = np.ones(mesh.n_vertices, dtype=bool)
+    flags = np.asarray(igl.is_vertex_manifold(F), dtype=bool)  # sized by the largest index
+    vm[: len(flags)] = flags
     bad_v = np.flatnonzero(~vm & used)
     if bad_v.size:
         raise MeshError(

@@ -1,0 +1,194 @@
+"""Fuzzing with hypothesis: random meshes, curves and options through the public API.
+
+The only exceptions allowed are igljoin's documented ones (``IgljoinError``
+subclasses, all ``ValueError``); results never contain NaN/Inf and each call
+finishes within a bound. ``make test`` runs the ``ci`` profile (over 2,000
+examples in all); ``make fuzz`` runs the ``fuzz`` profile (many more).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+
+import igljoin
+
+settings.register_profile(
+    "ci", max_examples=700, deadline=None, suppress_health_check=[HealthCheck.too_slow]
+)
+settings.register_profile(
+    "fuzz", max_examples=20_000, deadline=None, suppress_health_check=[HealthCheck.too_slow]
+)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+#: Seconds one call may take on these tiny meshes (a join of ~100 vertices takes
+#: ~10-50 ms; the bound catches hangs, not slowness).
+CALL_BOUND = 10.0
+
+
+def grid(nx: int, ny: int, heights: np.ndarray, jitter: np.ndarray) -> igljoin.Mesh:
+    """A (nx × ny) grid sheet with given heights (nx*ny,) and in-plane jitter (nx*ny, 2)."""
+    x, y = np.meshgrid(np.arange(nx, dtype=float), np.arange(ny, dtype=float))
+    V = np.stack([x.ravel(), y.ravel(), heights], axis=1)
+    V[:, :2] += jitter
+    i = (np.arange(nx - 1)[None, :] + nx * np.arange(ny - 1)[:, None]).ravel()
+    F = np.concatenate([np.stack([i, i + 1, i + nx + 1], 1), np.stack([i, i + nx + 1, i + nx], 1)])
+    return igljoin.Mesh(V, F)
+
+
+@st.composite
+def sheets(draw, offset=0.0):
+    nx = draw(st.integers(3, 7))
+    ny = draw(st.integers(3, 7))
+    n = nx * ny
+    h = np.array(draw(st.lists(st.floats(-0.3, 0.3), min_size=n, max_size=n)))
+    j = np.array(draw(st.lists(st.floats(-0.2, 0.2), min_size=2 * n, max_size=2 * n)))
+    m = grid(nx, ny, h, j.reshape(n, 2))
+    return igljoin.Mesh(m.V + [0.0, 0.0, offset], m.F)
+
+
+@st.composite
+def curves(draw, mesh: igljoin.Mesh):
+    loop = igljoin.boundary_loops(mesh.F)[0]
+    kind = draw(st.sampled_from(["closed", "start", "open", "via", "point", "indices"]))
+    a = int(draw(st.sampled_from(loop.tolist())))
+    b = int(draw(st.sampled_from(loop.tolist())))
+    if kind == "closed":
+        return None
+    if kind == "start":
+        return igljoin.Curve(start=a)
+    if kind == "open":
+        return igljoin.Curve(start=a, end=b)
+    if kind == "via":
+        c = int(draw(st.sampled_from(loop.tolist())))
+        return igljoin.Curve(start=a, end=b, via=c)
+    if kind == "point":
+        return igljoin.Curve(start=mesh.V[a] + draw(st.floats(-0.1, 0.1)))
+    k = draw(st.integers(1, len(loop)))
+    s = draw(st.integers(0, len(loop) - 1))
+    return np.roll(loop, -s)[:k]
+
+
+options = st.fixed_dictionaries(
+    {},
+    optional={
+        "smooth": st.booleans(),
+        "shape_weight": st.floats(0.0, 5.0),
+        "stretch_weight": st.floats(0.0, 5.0),
+        "smooth_weight": st.floats(0.0, 50.0),
+        "smooth_mode": st.sampled_from(["robust", "paper"]),
+        "laplacian": st.sampled_from(["uniform", "cotangent"]),
+        "rotation_aware": st.booleans(),
+        "max_iterations": st.integers(1, 60),
+        "acceleration": st.integers(0, 8),
+        "snap_tolerance": st.floats(0.0, 0.49),
+    },
+)
+
+
+def _check(res: igljoin.JoinResult) -> None:
+    assert np.isfinite(res.guest.V).all()
+    assert np.isfinite(res.area_ratio).all()
+    assert np.isfinite(res.energy).all()
+
+
+@given(data=st.data())
+def test_random_valid_joins(data):
+    host = data.draw(sheets())
+    guest = data.draw(sheets(offset=2.0))
+    hc = data.draw(curves(host))
+    gc = data.draw(curves(guest))
+    opts = data.draw(options)
+    t0 = time.perf_counter()
+    try:
+        res = igljoin.join(host, guest, hc, gc, **opts)
+    except igljoin.IgljoinError as exc:
+        event(f"rejected: {type(exc).__name__}")
+        return
+    event("joined")
+    assert time.perf_counter() - t0 < CALL_BOUND
+    _check(res)
+
+
+@given(
+    V=st.lists(
+        st.lists(st.floats(allow_nan=True, allow_infinity=True, width=64), min_size=3, max_size=3),
+        min_size=0,
+        max_size=12,
+    ),
+    F=st.lists(st.lists(st.integers(-2, 14), min_size=3, max_size=3), min_size=0, max_size=16),
+    curve=st.one_of(st.none(), st.integers(-1, 3), st.lists(st.integers(-1, 14), max_size=6)),
+)
+def test_random_corrupt_meshes_only_raise_documented_errors(V, F, curve):
+    host = grid(4, 4, np.zeros(16), np.zeros((16, 2)))
+    t0 = time.perf_counter()
+    try:
+        res = igljoin.join(host, (np.array(V, dtype=float).reshape(-1, 3), F), None, curve)
+    except igljoin.IgljoinError as exc:
+        event(f"rejected: {type(exc).__name__}")
+        return
+    event("joined")
+    assert time.perf_counter() - t0 < CALL_BOUND
+    _check(res)
+
+
+@given(
+    opts=st.dictionaries(
+        st.sampled_from(
+            [
+                "shape_weight",
+                "stretch_weight",
+                "smooth_weight",
+                "tolerance",
+                "max_iterations",
+                "snap_tolerance",
+                "smooth_radius",
+                "acceleration",
+                "time_limit",
+                "smooth_tolerance",
+                "smooth",
+            ]
+        ),
+        st.one_of(
+            st.floats(allow_nan=True, allow_infinity=True),
+            st.integers(-5, 5),
+            st.booleans(),
+            st.text(max_size=3),
+            st.none(),
+        ),
+        max_size=3,
+    )
+)
+def test_random_option_values_only_raise_options_errors(opts):
+    try:
+        igljoin.JoinOptions.make(**opts)
+    except igljoin.OptionsError:
+        pass
+
+
+def test_profile_runs_enough_examples():
+    """The ci profile's examples over the three fuzz tests add up to at least 2,000."""
+    profile = settings()
+    assert 3 * profile.max_examples >= 2000 or os.environ.get("HYPOTHESIS_PROFILE") not in (
+        None,
+        "ci",
+    )
+
+
+@pytest.mark.skipif(not hasattr(igljoin, "weld"), reason="welding lands with its own issue")
+@given(data=st.data())
+@settings(max_examples=60)
+def test_random_joins_weld_cleanly(data):
+    host = data.draw(sheets())
+    guest = data.draw(sheets(offset=2.0))
+    try:
+        res = igljoin.join(host, guest)
+        welded = igljoin.weld(res)
+    except igljoin.IgljoinError:
+        return
+    assert np.isfinite(welded.mesh.V).all()
