@@ -168,7 +168,9 @@ def arc_length_parameters(P: np.ndarray, closed: bool) -> tuple[np.ndarray, floa
     seg = _segment_lengths(P, closed)
     length = float(seg.sum())
     cum = np.concatenate([[0.0], np.cumsum(seg)])
-    t = cum[: len(P)] / length if length > 0 else np.zeros(len(P))
+    t = cum[: len(P)] / cum[-1] if length > 0 else np.zeros(len(P))
+    if not closed and length > 0:
+        t[-1] = 1.0
     return t, length
 
 
@@ -249,6 +251,16 @@ def select_curve(mesh: Mesh, spec: Any, *, name: str = "curve") -> SelectedCurve
         If the selection is not on a boundary, spans two loops, is too short...
     """
     curve = Curve.coerce(spec, name)
+    if curve.indices is not None and any(
+        v is not None for v in (curve.start, curve.end, curve.via, curve.loop)
+    ):
+        raise CurveError(
+            f"{name}: give either the curve's indices or start/end/via/loop, not both"
+        )
+    if curve.loop is not None and (
+        isinstance(curve.loop, bool) or not isinstance(curve.loop, (int, np.integer))
+    ):
+        raise CurveError(f"{name}: loop={curve.loop!r} must be an integer loop index")
     loops = boundary_loops(mesh.F)
     if not loops:
         raise CurveError(

@@ -19,14 +19,14 @@ MAX_ELEMENTS = 20_000_000
 
 def _readonly(a: np.ndarray) -> np.ndarray:
     """A C-ordered read-only copy (the caller's array and its flags stay untouched)."""
-    if not a.flags.writeable and a.flags.c_contiguous:
-        return a
     a = np.array(a, order="C", copy=True)
     a.flags.writeable = False
     return a
 
 
 def _vertices(V: Any, name: str) -> np.ndarray:
+    if np.iscomplexobj(V):
+        raise MeshError(f"{name}: vertex array V is complex; pass real (n, 3) coordinates")
     try:
         V = np.asarray(V, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -103,7 +103,7 @@ def _attributes(attrs: Mapping[str, Any] | None, count: int, kind: str, name: st
                 f"{name}: {kind} attribute '{key}' has shape {a.shape}; it needs one value "
                 f"per {kind} ({count})"
             )
-        if not key.isidentifier():
+        if not isinstance(key, str) or not key.isidentifier():
             raise MeshError(
                 f"{name}: attribute name {key!r} is not a plain identifier; use letters, "
                 "digits and underscores"

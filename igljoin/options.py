@@ -138,9 +138,15 @@ class JoinOptions:
         for name in ("smooth", "rotation_aware"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise OptionsError(f"{name}={getattr(self, name)!r} must be True or False")
+            object.__setattr__(self, name, bool(getattr(self, name)))
+        for name in ("max_iterations", "acceleration"):
+            object.__setattr__(self, name, int(getattr(self, name)))
         if self.stiffness is not None:
-            k = np.asarray(self.stiffness, dtype=np.float64)
-            if k.ndim != 1 or not np.isfinite(k).all() or (k <= 0).any():
+            try:
+                k = np.asarray(self.stiffness, dtype=np.float64)
+            except (TypeError, ValueError):
+                k = np.zeros(0)
+            if k.ndim != 1 or k.size == 0 or not np.isfinite(k).all() or (k <= 0).any():
                 raise OptionsError(
                     "stiffness must be a 1-D array of positive finite numbers (one per guest "
                     "vertex or face, 1 = default tissue)"

@@ -1,0 +1,221 @@
+"""Tests of the join options (igljoin.options.JoinOptions)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from igljoin.errors import IgljoinError, OptionsError
+from igljoin.options import JoinOptions
+
+NAMES = sorted(f.name for f in dataclasses.fields(JoinOptions))
+
+
+def test_options_error_is_a_value_error():
+    assert issubclass(OptionsError, IgljoinError)
+    assert issubclass(OptionsError, ValueError)
+
+
+def test_defaults_are_valid():
+    opt = JoinOptions()
+    for f in dataclasses.fields(JoinOptions):
+        assert getattr(opt, f.name) == f.default
+    # every default passes validation when given explicitly too
+    again = JoinOptions(**{f.name: f.default for f in dataclasses.fields(JoinOptions)})
+    assert again == opt
+
+
+def test_options_are_frozen():
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        JoinOptions().tolerance = 1.0
+
+
+def test_numbers_are_stored_as_float():
+    opt = JoinOptions(shape_weight=2, smooth_weight=np.float32(0.5), tolerance=np.int64(1))
+    assert type(opt.shape_weight) is float and opt.shape_weight == 2.0
+    assert type(opt.smooth_weight) is float and opt.smooth_weight == 0.5
+    assert type(opt.tolerance) is float and opt.tolerance == 1.0
+
+
+@pytest.mark.parametrize(
+    ("name", "value"),
+    [
+        ("shape_weight", -1.0),
+        ("stretch_weight", -0.1),
+        ("smooth_weight", -1e-9),
+        ("smooth_radius", -1.0),
+        ("shape_weight", math.nan),
+        ("smooth_weight", math.inf),
+        ("stretch_weight", "1"),
+        ("shape_weight", True),
+        ("shape_weight", None),
+        ("tolerance", 0.0),
+        ("tolerance", -1e-5),
+        ("tolerance", math.nan),
+        ("tolerance", math.inf),
+        ("max_iterations", 0),
+        ("max_iterations", -3),
+        ("max_iterations", 1.5),
+        ("max_iterations", 10.0),
+        ("max_iterations", True),
+        ("snap_tolerance", 0.5),
+        ("snap_tolerance", 0.7),
+        ("snap_tolerance", -0.1),
+        ("snap_tolerance", math.nan),
+        ("acceleration", -1),
+        ("acceleration", 51),
+        ("acceleration", 2.0),
+        ("acceleration", True),
+        ("smooth_tolerance", 90.0),
+        ("smooth_tolerance", 120),
+        ("smooth_tolerance", -1.0),
+        ("smooth_tolerance", math.nan),
+        ("time_limit", 0.0),
+        ("time_limit", -1.0),
+        ("time_limit", math.nan),
+    ],
+)
+def test_number_out_of_range(name, value):
+    with pytest.raises(OptionsError, match=rf"^{name}="):
+        JoinOptions(**{name: value})
+
+
+@pytest.mark.parametrize(
+    ("name", "value"),
+    [
+        ("shape_weight", 0.0),
+        ("smooth_weight", 0.0),
+        ("snap_tolerance", 0.0),
+        ("snap_tolerance", 0.49),
+        ("acceleration", 0),
+        ("acceleration", 50),
+        ("max_iterations", 1),
+        ("max_iterations", np.int64(3)),
+        ("smooth_tolerance", 0.0),
+        ("smooth_tolerance", 89.9),
+        ("time_limit", 0.5),
+        ("smooth", np.bool_(False)),
+    ],
+)
+def test_values_at_the_edge_of_the_range_are_accepted(name, value):
+    assert getattr(JoinOptions(**{name: value}), name) == value
+
+
+def test_shape_and_stretch_both_zero():
+    with pytest.raises(OptionsError, match="shape_weight and stretch_weight are both 0"):
+        JoinOptions(shape_weight=0, stretch_weight=0.0)
+    JoinOptions(shape_weight=0.0)  # one of them is enough
+    JoinOptions(stretch_weight=0.0)
+
+
+@pytest.mark.parametrize(
+    ("name", "value"),
+    [
+        ("smooth_mode", "Paper"),
+        ("smooth_mode", None),
+        ("laplacian", "cot"),
+        ("stiffness_on", "edge"),
+        ("initial_guess", "zero"),
+        ("initial_guess", ""),
+    ],
+)
+def test_enum_strings(name, value):
+    with pytest.raises(OptionsError, match=rf"^{name}=.* is not one of '"):
+        JoinOptions(**{name: value})
+
+
+@pytest.mark.parametrize("name", ["smooth", "rotation_aware"])
+@pytest.mark.parametrize("value", ["yes", 1, 0, None])
+def test_bool_options(name, value):
+    with pytest.raises(OptionsError, match=rf"^{name}=.* must be True or False"):
+        JoinOptions(**{name: value})
+
+
+@pytest.mark.parametrize(
+    "value",
+    [[-1.0, 1.0], [0.0, 1.0], [math.nan, 1.0], [1.0, math.inf], [[1.0, 1.0]], 2.0],
+    ids=["negative", "zero", "nan", "inf", "2-d", "scalar"],
+)
+def test_bad_stiffness(value):
+    with pytest.raises(OptionsError, match="^stiffness must be a 1-D array of positive finite"):
+        JoinOptions(stiffness=value)
+
+
+def test_non_numeric_stiffness():
+    with pytest.raises(OptionsError, match="stiffness"):
+        JoinOptions(stiffness=["soft", "hard"])
+
+
+def test_empty_stiffness():
+    with pytest.raises(OptionsError, match="stiffness"):
+        JoinOptions(stiffness=[])
+
+
+def test_stiffness_is_stored_as_float_array():
+    opt = JoinOptions(stiffness=[1, 2, 4])
+    assert isinstance(opt.stiffness, np.ndarray) and opt.stiffness.dtype == np.float64
+    np.testing.assert_array_equal(opt.stiffness, [1.0, 2.0, 4.0])
+
+
+# ----------------------------------------------------------------------------
+# make, replace, to_json
+# ----------------------------------------------------------------------------
+
+
+def test_make_from_none_dict_and_instance():
+    assert JoinOptions.make() == JoinOptions()
+    assert JoinOptions.make({"tolerance": 1e-3}).tolerance == 1e-3
+    base = JoinOptions(tolerance=1e-3, smooth=False)
+    opt = JoinOptions.make(base, max_iterations=7)
+    assert (opt.tolerance, opt.smooth, opt.max_iterations) == (1e-3, False, 7)
+    # keyword overrides win over the mapping
+    assert JoinOptions.make({"max_iterations": 3}, max_iterations=4).max_iterations == 4
+
+
+def test_make_unknown_keys_lists_valid_ones():
+    with pytest.raises(OptionsError) as info:
+        JoinOptions.make({"tolerence": 1e-3}, smoth=True)
+    msg = str(info.value)
+    assert "unknown join options ['smoth', 'tolerence']" in msg
+    assert "valid options are " + ", ".join(NAMES) in msg
+
+
+def test_make_validates():
+    with pytest.raises(OptionsError, match="^acceleration="):
+        JoinOptions.make({"acceleration": 99})
+
+
+def test_replace_validates_and_keeps_the_rest():
+    opt = JoinOptions(smooth=False, stiffness=[1.0, 3.0])
+    new = opt.replace(tolerance=1e-3)
+    assert new.tolerance == 1e-3 and new.smooth is False
+    np.testing.assert_array_equal(new.stiffness, [1.0, 3.0])
+    assert opt.tolerance == JoinOptions().tolerance  # the original is unchanged
+    with pytest.raises(OptionsError, match="^tolerance="):
+        opt.replace(tolerance=-1.0)
+    with pytest.raises(OptionsError, match="unknown join options"):
+        opt.replace(tol=1.0)
+
+
+def test_to_json_defaults():
+    out = JoinOptions().to_json()
+    assert sorted(out) == NAMES
+    assert json.loads(json.dumps(out)) == out
+
+
+def test_to_json_summarises_stiffness():
+    out = JoinOptions(stiffness=np.array([0.5, 2.0, 1.0]), time_limit=3).to_json()
+    text = json.dumps(out)
+    back = json.loads(text)
+    assert back["stiffness"] == {"count": 3, "min": 0.5, "max": 2.0}
+    assert back["time_limit"] == 3.0
+
+
+def test_to_json_with_numpy_scalars():
+    opt = JoinOptions(max_iterations=np.int64(10), acceleration=np.int32(2), smooth=np.bool_(True))
+    back = json.loads(json.dumps(opt.to_json()))
+    assert back["max_iterations"] == 10 and back["acceleration"] == 2 and back["smooth"] is True
