@@ -25,7 +25,11 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 
 
 def _vertices(V: Any, name: str) -> np.ndarray:
-    if np.iscomplexobj(V):
+    try:
+        complex_input = np.iscomplexobj(np.asarray(V))
+    except (TypeError, ValueError):
+        complex_input = False
+    if complex_input:
         raise MeshError(f"{name}: vertex array V is complex; pass real (n, 3) coordinates")
     try:
         V = np.asarray(V, dtype=np.float64)
