@@ -31,6 +31,7 @@ from .io import read_mesh, write_mesh
 from .join import JoinResult, JoinSolver, join
 from .mesh import Mesh, as_mesh
 from .options import JoinOptions
+from .weld import Welded, weld
 
 __version__ = "0.1.0"
 
@@ -49,11 +50,13 @@ __all__ = [
     "SolveError",
     "SpecError",
     "WeldError",
+    "Welded",
     "as_mesh",
     "boundary_loops",
     "join",
     "phantoms",
     "read_mesh",
     "select_curve",
+    "weld",
     "write_mesh",
 ]

@@ -367,14 +367,30 @@ class JoinSolver:
     def _result(self, run, bc) -> JoinResult:
         c = self.corr
         X = run.X
-        ratio = metrics.area_ratio(c.V, X, c.F)
-        guest = Mesh(X, c.F, face_attributes={"area_ratio": ratio}, name="deformed guest")
-        rest = Mesh(c.V, c.F, name="rest guest")
         hc = self.host_curve
+        ratio = metrics.area_ratio(c.V, X, c.F)
+        strain = metrics.edge_strain(c.V, X, self.E)
+        vertex_strain = metrics.vertex_strain(self.E, strain, len(X))
+        displacement = metrics.nonrigid_displacement(c.V, X)
+        on_seam = np.zeros(len(X), dtype=bool)
+        on_seam[c.seam] = True
+        guest = Mesh(
+            X,
+            c.F,
+            vertex_attributes={
+                "displacement": displacement,
+                "strain": vertex_strain,
+                "seam": on_seam,
+            },
+            face_attributes={"area_ratio": ratio},
+            name="deformed guest",
+        )
+        rest = Mesh(c.V, c.F, name="rest guest")
         guest_at_host = c.seam[c.host_hit]
         crease = metrics.crease_angles(
             self.host.V, self.host.F, hc.indices, X, c.F, guest_at_host, hc.closed
         )
+        host_dihedral = metrics.host_dihedral_angles(self.host.V, self.host.F, hc.indices)
         rows = sum(t.soft_rows for t in self.terms)
         counts = {
             "points": len(c.V),
@@ -385,10 +401,6 @@ class JoinSolver:
             "faces": len(c.F),
             "host_curve": len(hc.indices),
         }
-        R, t = _rigid_fit(c.V, X)
-        rigid = c.V @ R.T + t
-        displacement = np.linalg.norm(X - rigid, axis=1)
-        strain = metrics.edge_strain(c.V, X, self.E)
         folds = metrics.folded_pairs(c.V, X, c.F)
         total_ratio = float(
             face_normals_areas(X, c.F)[1].sum() / face_normals_areas(c.V, c.F)[1].sum()
@@ -396,13 +408,18 @@ class JoinSolver:
         m = {
             "seam_gap": metrics.seam_gap(X[c.seam], self.host.V[hc.indices], hc.closed),
             "crease_deg": {**metrics.summary(crease)},
+            "host_dihedral_deg": {
+                **metrics.summary(host_dihedral),
+                "rings": metrics.HOST_DIHEDRAL_RINGS,
+            },
             "area_ratio": {**metrics.summary(ratio), "total": total_ratio},
             "area_change": metrics.summary(np.abs(ratio - 1.0)),
             "strain": metrics.summary(strain),
+            "vertex_strain": metrics.summary(vertex_strain),
             "displacement_nonrigid": metrics.summary(displacement),
             "folded_pairs": len(folds),
         }
-        return JoinResult(
+        result = JoinResult(
             host=self.host,
             guest=guest,
             rest_guest=rest,
@@ -423,6 +440,9 @@ class JoinSolver:
             stop_reason=run.reason,
             pairing=self.pairing,
         )
+        # weld (kept in the result) and count self-intersections near the seam
+        result.metrics.update(result.measure_weld())
+        return result
 
 
 def _same(a: Any, b: Any) -> bool:

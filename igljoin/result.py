@@ -1,16 +1,56 @@
-"""The outcome of a join: deformed guest, correspondence, measurements."""
+"""The outcome of a join: deformed guest, correspondence, measurements, output files."""
 
 from __future__ import annotations
 
+import json
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from .atomic import atomic_write_text
 from .correspond import Correspondence
+from .errors import WeldError
+from .io import write_mesh
 from .mesh import Mesh
+from .metrics import SELF_INTERSECTION_RINGS, ring_band, self_intersections
 from .options import JoinOptions
+from .weld import Welded, weld
 
-__all__ = ["JoinResult"]
+__all__ = ["JoinResult", "plain_json"]
+
+
+def plain_json(value: Any) -> Any:
+    """``value`` with numpy scalars and arrays turned into plain Python (for ``json.dumps``).
+
+    Non-finite floats become ``None`` (JSON has no NaN).
+    """
+    if isinstance(value, dict):
+        return {str(k): plain_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain_json(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return plain_json(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value
+
+
+def _with_quality(mesh: Mesh) -> Mesh:
+    """``mesh`` with ``quality`` copies of its displacement (vertices) and area ratio (faces).
+
+    MeshLab reads no other per-element property of a PLY file.
+    """
+    va, fa = mesh.vertex_attributes, mesh.face_attributes
+    vertex = {"quality": va["displacement"]} if "displacement" in va else {}
+    face = {"quality": fa["area_ratio"]} if "area_ratio" in fa else {}
+    return mesh.with_attributes(vertex=vertex, face=face)
 
 
 @dataclass
@@ -23,7 +63,9 @@ class JoinResult:
         The host, unchanged.
     guest : Mesh
         Deformed guest: original vertices first in original order, inserted
-        seam vertices after. Face attribute ``area_ratio``.
+        seam vertices after. Face attribute ``area_ratio``; vertex attributes
+        ``displacement`` (non-rigid, length unit), ``strain`` (mean of the
+        incident edges' strains) and ``seam`` (bool).
     rest_guest : Mesh
         The guest before deformation, with the inserted seam vertices (same
         connectivity as ``guest``).
@@ -47,8 +89,16 @@ class JoinResult:
         Seconds per phase.
     options : JoinOptions
     correspondence : Correspondence
+    crease : ndarray, shape (k,)
+        Crease angle (degrees) at each host curve vertex.
     metrics : dict
-        Seam gap, crease angles, area ratio, strain and displacement summaries, folds.
+        Plain-JSON join quality: seam gap, crease angles and the host's own
+        dihedral angles near the seam, area ratio, edge and vertex strain,
+        displacement, folds, weld counts and seam self-intersections (see
+        ``docs/results.md``).
+    merged : Welded
+        Host and deformed guest welded into one mesh (computed on first use,
+        then kept; see :func:`igljoin.weld.weld`).
     """
 
     host: Mesh
@@ -70,23 +120,143 @@ class JoinResult:
     metrics: dict = field(default_factory=dict)
     stop_reason: str = ""
     pairing: dict = field(default_factory=dict)
+    _merged: Welded | None = field(default=None, init=False, repr=False, compare=False)
+
+    @property
+    def merged(self) -> Welded:
+        """Host and deformed guest as one mesh with shared seam vertices (cached).
+
+        Raises
+        ------
+        WeldError
+            If the two cannot be welded into a clean oriented manifold.
+        """
+        if self._merged is None:
+            self._merged = weld(self)
+        return self._merged
 
     @property
     def guest_at_host(self) -> np.ndarray:
         """Guest vertex lying on each host curve vertex, shape (k,)."""
         return self.seam[self.correspondence.host_hit]
 
-    def report(self) -> dict:
-        """Plain-JSON summary of the join (counts, timings, convergence, metrics)."""
+    def measure_weld(self, rings: int = SELF_INTERSECTION_RINGS) -> dict:
+        """Weld (kept as :attr:`merged`) and count self-intersections near the seam.
+
+        Run by every join. A weld failure is recorded, not raised.
+
+        Parameters
+        ----------
+        rings : int
+            Faces of the welded mesh within this many rings of the seam are
+            tested against each other (:func:`igljoin.metrics.ring_band`).
+
+        Returns
+        -------
+        dict
+            ``{"weld": {...}, "self_intersections": {...}}``, plain JSON:
+            ``weld`` holds ``ok`` and, when welded, the counts of
+            :meth:`Welded.summary`, otherwise ``error`` (the message);
+            ``self_intersections`` holds ``pairs`` (intersecting face pairs),
+            ``host_guest``, ``guest_guest``, ``host_host`` (the same pairs by
+            the faces' sides), ``faces_tested`` and ``rings``; it is ``None``
+            when the weld failed.
+        """
+        try:
+            welded = self.merged
+        except WeldError as exc:
+            return {"weld": {"ok": False, "error": str(exc)}, "self_intersections": None}
+        F = welded.mesh.F
+        band = ring_band(F, welded.seam, rings)
+        pairs = self_intersections(welded.mesh.V, F, band)
+        sides = welded.label[pairs].sum(axis=1)  # 0 host-host, 1 host-guest, 2 guest-guest
         return {
-            "closed": bool(self.closed),
-            "converged": bool(self.converged),
-            "stop_reason": self.stop_reason,
-            "iterations": int(self.iterations),
-            "energy": {"initial": float(self.energy[0]), "final": float(self.energy[-1])},
-            "counts": {k: int(v) for k, v in self.counts.items()},
-            "timings": {k: float(v) for k, v in self.timings.items()},
-            "metrics": self.metrics,
-            "options": self.options.to_json(),
-            "pairing": {k: float(v) for k, v in self.pairing.items()},
+            "weld": {"ok": True, **welded.summary()},
+            "self_intersections": {
+                "pairs": int(len(pairs)),
+                "host_guest": int((sides == 1).sum()),
+                "guest_guest": int((sides == 2).sum()),
+                "host_host": int((sides == 0).sum()),
+                "faces_tested": int(band.sum()),
+                "rings": int(rings),
+            },
         }
+
+    def report(self) -> dict:
+        """Plain-JSON summary of the join (counts, timings, convergence, metrics, options).
+
+        ``json.dumps(result.report())`` always works: numpy values are
+        converted and non-finite numbers become ``null``.
+        """
+        return plain_json(
+            {
+                "closed": bool(self.closed),
+                "converged": bool(self.converged),
+                "stop_reason": self.stop_reason,
+                "iterations": int(self.iterations),
+                "energy": {"initial": float(self.energy[0]), "final": float(self.energy[-1])},
+                "counts": {k: int(v) for k, v in self.counts.items()},
+                "timings": {k: float(v) for k, v in self.timings.items()},
+                "metrics": self.metrics,
+                "options": self.options.to_json(),
+                "pairing": {k: float(v) for k, v in self.pairing.items()},
+            }
+        )
+
+    def save(self, folder: str | os.PathLike, *, merged: bool = True) -> dict[str, Path]:
+        """Write the deformed guest, the welded mesh and the report into ``folder``.
+
+        Parameters
+        ----------
+        folder : str or os.PathLike
+            Created (with its parents) if missing. Existing files of the same
+            names are replaced, each atomically: a file is either the complete
+            new one or the old one.
+        merged : bool
+            Also write ``merged.ply``. Pass ``False`` to save a join whose
+            weld fails (:class:`~igljoin.errors.WeldError`).
+
+        Returns
+        -------
+        dict of str to pathlib.Path
+            ``{"guest": .../guest.ply, "merged": .../merged.ply,
+            "report": .../report.json}`` (no ``"merged"`` if not written).
+
+        Notes
+        -----
+        * ``guest.ply``: the deformed guest; vertex properties
+          ``displacement``, ``strain``, ``seam``; face property ``area_ratio``.
+        * ``merged.ply``: :attr:`merged` with its vertex properties ``seam``,
+          ``source``, ``source_id``, ``strain``, ``displacement`` and face
+          properties ``label``, ``source_face``, ``area_ratio``.
+        * ``report.json``: :meth:`report` (which includes the options).
+        * Both PLY files also carry ``quality`` properties, copies of the
+          vertex ``displacement`` and the face ``area_ratio``: MeshLab reads
+          only that property name (Filters > Color Creation > Colorize by
+          vertex / face quality).
+
+        Binary little-endian PLY with float64 values: :func:`igljoin.read_mesh`
+        returns every property as an attribute (exactly); MeshLab and
+        pymeshlab load the geometry and the ``quality`` values, ParaView the
+        geometry (see ``docs/results.md``).
+        """
+        out = Path(folder)
+        if out.exists() and not out.is_dir():
+            raise NotADirectoryError(
+                f"cannot save into {out}: it is a file, not a folder; pass a folder path"
+            )
+        welded = None
+        if merged:
+            try:
+                welded = self.merged
+            except WeldError as exc:
+                raise WeldError(
+                    f"{exc} (to save the rest, call save(folder, merged=False))"
+                ) from None
+        out.mkdir(parents=True, exist_ok=True)
+        paths = {"guest": write_mesh(out / "guest.ply", _with_quality(self.guest))}
+        if welded is not None:
+            paths["merged"] = write_mesh(out / "merged.ply", _with_quality(welded.mesh))
+        text = json.dumps(self.report(), indent=2, allow_nan=False) + "\n"
+        paths["report"] = atomic_write_text(out / "report.json", text)
+        return paths
