@@ -1,0 +1,196 @@
+"""Title line and colour bar composited around rendered views with Pillow.
+
+Polyscope cannot draw text or colour bars into screenshots reliably, so the
+3D views are rendered into panels and placed on a canvas with a title band
+on top and a colour bar on the right. Fonts are Pillow's built-in ones:
+the same input gives the same pixels on every machine with the same Pillow.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from . import colors
+from ._backend import pillow
+
+__all__ = ["Layout", "compose", "figures_line", "layout"]
+
+#: Minimum picture size (width, height) that leaves room for the title and the colour bar.
+MIN_SIZE = (320, 240)
+
+_TEXT = (235, 235, 235)
+_DIM = (170, 172, 178)
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where things go on the canvas (pixels, origin top-left).
+
+    Attributes
+    ----------
+    size : (int, int)
+        Canvas width and height.
+    font_size : int
+    title_height : int
+        Height of the title band.
+    panels : list of (x, y, w, h)
+        3D panels, left to right.
+    bar : (x, y, w, h)
+        Colour bar column.
+    """
+
+    size: tuple[int, int]
+    font_size: int
+    title_height: int
+    panels: list[tuple[int, int, int, int]]
+    bar: tuple[int, int, int, int]
+
+
+def layout(size: tuple[int, int], n_panels: int) -> Layout:
+    """Split a canvas into a title band, ``n_panels`` 3D panels and a colour bar column."""
+    w, h = size
+    fs = max(11, round(min(h / 44.0, w / 60.0)))
+    title_h = int(2 * round(1.35 * fs) + 0.8 * fs)
+    bar_w = max(6 * fs, w // 9)
+    pw = (w - bar_w) // n_panels
+    bar_w = w - n_panels * pw
+    ph = h - title_h
+    panels = [(k * pw, title_h, pw, ph) for k in range(n_panels)]
+    return Layout((w, h), fs, title_h, panels, (n_panels * pw, title_h, bar_w, ph))
+
+
+def _fonts(size: int) -> Any:
+    ImageFont = pillow().ImageFont
+    try:
+        return ImageFont.load_default(size=size), ImageFont.load_default(size=round(size * 0.8))
+    except TypeError:  # Pillow < 10.1 or without FreeType: fixed bitmap font
+        f = ImageFont.load_default()
+        return f, f
+
+
+def _fmt(x: Any, spec: str) -> str:
+    return "n/a" if x is None else format(x, spec)
+
+
+#: Relative seam gap (in mean seam edges) below which the title says the seam is closed.
+CLOSED_GAP = 1e-9
+
+
+def seam_gap_text(gap: dict) -> str:
+    """The seam gap for a title: rounding-level gaps are reported as closed.
+
+    Gaps of a solved join are floating-point noise (~1e-16) that differs from
+    run to run; printing them would make pictures of the same case differ.
+    """
+    rel, top = gap.get("relative_max"), gap.get("max")
+    if rel is None or top is None:
+        return "seam gap n/a"
+    if rel < CLOSED_GAP:
+        return "seam gap < 1e-9 seam edge"
+    return f"seam gap max {top:.2g} ({rel:.2g} seam edge)"
+
+
+def figures_line(result: Any) -> str:
+    """Key figures of a result on one line (no timings: pictures stay reproducible)."""
+    m = result.metrics
+    crease = m.get("crease_deg", {})
+    ratio = m.get("area_ratio", {})
+    change = m.get("area_change", {})
+    mean_change = change.get("mean")
+    parts = [
+        f"crease mean {_fmt(crease.get('mean'), '.2f')}\u00b0, max {_fmt(crease.get('max'), '.2f')}"
+        "\u00b0",
+        seam_gap_text(m.get("seam_gap", {})),
+        f"area ratio {_fmt(ratio.get('min'), '.2f')} to {_fmt(ratio.get('max'), '.2f')}, "
+        f"mean change {_fmt(None if mean_change is None else 100 * mean_change, '.1f')}%",
+        f"{result.iterations} iterations{'' if result.converged else ' (not converged)'}",
+    ]
+    return "   \u00b7   ".join(parts)
+
+
+def _colour_bar(img: Any, lay: Layout, limit: float, data_range: tuple, font: Any, small: Any):
+    PIL = pillow()
+    draw = PIL.ImageDraw.Draw(img)
+    x, y, w, h = lay.bar
+    fs = lay.font_size
+    top = y + int(3.2 * fs)
+    bottom = y + h - int(1.6 * fs)
+    bx0 = x + int(0.9 * fs)
+    bx1 = bx0 + max(8, int(1.1 * fs))
+    draw.text((x + int(0.5 * fs), y + int(0.4 * fs)), "area ratio", fill=_TEXT, font=font)
+    draw.text((x + int(0.5 * fs), y + int(1.7 * fs)), "deformed / rest", fill=_DIM, font=small)
+    t = 1.0 - 2.0 * np.arange(bottom - top) / max(bottom - top - 1, 1)
+    rgb = np.round(colors.diverging(t) * 255).astype(np.uint8)
+    gradient = np.repeat(rgb[:, None, :], bx1 - bx0 + 1, axis=1)
+    img.paste(PIL.Image.fromarray(gradient), (bx0, top))
+    draw.rectangle([bx0, top, bx1, bottom - 1], outline=_DIM)
+
+    def row_of(tt: float) -> int:
+        return int(round(top + (1.0 - tt) * 0.5 * (bottom - 1 - top)))
+
+    ticks, values = colors.area_ticks(limit)
+    for tt, v in zip(ticks, values):
+        r = row_of(float(tt))
+        draw.line([(bx1, r), (bx1 + 4, r)], fill=_TEXT)
+        draw.text((bx1 + 7, r), f"{v:.3g}", fill=_TEXT, font=small, anchor="lm")
+    scale = np.log2(limit)
+    for v in data_range:
+        if v is None or not np.isfinite(v) or v <= 0:
+            continue
+        r = row_of(float(np.clip(np.log2(v) / scale, -1.0, 1.0)))
+        draw.polygon([(bx0 - 2, r), (bx0 - 8, r - 4), (bx0 - 8, r + 4)], fill=_TEXT)
+    draw.text((x + int(0.5 * fs), bottom + int(0.35 * fs)), "marks: min/max", fill=_DIM, font=small)
+
+
+def compose(
+    views: list[np.ndarray],
+    lay: Layout,
+    *,
+    title: str,
+    subtitle: str,
+    captions: list[str],
+    limit: float,
+    data_range: tuple,
+    background: tuple | None = None,
+) -> Any:
+    """Place rendered RGB views on a canvas with the title band and the colour bar.
+
+    Parameters
+    ----------
+    views : list of ndarray of uint8, shape (h, w, 3)
+        One image per panel of ``lay``.
+    lay : Layout
+    title, subtitle : str
+        Title line (case name) and figures line.
+    captions : list of str
+        Small caption in each panel's top-left corner.
+    limit : float
+        Area ratio at full colour.
+    data_range : (float, float)
+        Smallest and largest area ratio, marked on the bar.
+    background : (int, int, int), optional
+        Canvas colour (default :data:`igljoin.viz.colors.BACKGROUND`); give the
+        panels' rendered background so that bands and panels match exactly.
+
+    Returns
+    -------
+    PIL.Image.Image
+        RGB image of size ``lay.size``.
+    """
+    PIL = pillow()
+    bg = background or tuple(int(round(255 * c)) for c in colors.BACKGROUND)
+    img = PIL.Image.new("RGB", lay.size, bg)
+    for (x, y, _, _), view in zip(lay.panels, views):
+        img.paste(PIL.Image.fromarray(np.ascontiguousarray(view)), (x, y))
+    draw = PIL.ImageDraw.Draw(img)
+    font, small = _fonts(lay.font_size)
+    fs = lay.font_size
+    draw.text((int(0.6 * fs), int(0.4 * fs)), title, fill=_TEXT, font=font)
+    draw.text((int(0.6 * fs), int(0.4 * fs) + round(1.35 * fs)), subtitle, fill=_DIM, font=small)
+    for (x, y, _, _), caption in zip(lay.panels, captions):
+        draw.text((x + int(0.6 * fs), y + int(0.3 * fs)), caption, fill=_DIM, font=small)
+    _colour_bar(img, lay, limit, data_range, font, small)
+    return img
