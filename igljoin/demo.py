@@ -309,7 +309,7 @@ def run(
     notes = []
     if figures:
         try:
-            from .figures import paper_figures
+            from .viz.figures import paper_figures
         except ImportError as exc:  # polyscope/pillow missing
             notes.append(f"figures skipped: {exc}")
         else:
