@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from . import phantoms
 from .boundary import Curve, boundary_loops, select_curve
+from .clean import CleanReport, ResampleReport, clean, diagnose, resample
 from .errors import (
     CurveError,
     IgljoinError,
@@ -31,11 +32,19 @@ from .io import read_mesh, write_mesh
 from .join import JoinResult, JoinSolver, join
 from .mesh import Mesh, as_mesh
 from .options import JoinOptions
+from .spec import CaseSpec, load_case
 from .weld import Welded, weld
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "CaseSpec",
+    "CleanReport",
+    "ResampleReport",
+    "clean",
+    "diagnose",
+    "load_case",
+    "resample",
     "Curve",
     "CurveError",
     "IgljoinError",

@@ -106,8 +106,9 @@ def check_guest_reaches_seam(F: np.ndarray, n: int, seam: np.ndarray) -> None:
     if np.unique(seam).size >= n:
         raise SolveError(
             "guest: every vertex lies on the seam, so there is nothing to deform (no free "
-            "vertex); the guest needs interior vertices — refine it (igljoin.clean(..., "
-            "resample=...)) or join a larger piece"
+            "vertex); the guest needs interior vertices — refine it with "
+            "igljoin.resample(guest, target_edge) (or resample = true in join.toml) or join a "
+            "larger piece"
         )
     comp = np.asarray(igl.vertex_components(F), dtype=np.int64)
     touched = np.unique(comp[seam])

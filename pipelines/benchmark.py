@@ -1,0 +1,474 @@
+"""Benchmark the join: time per phase, iterations, memory, libigl ARAP, convergence, scaling.
+
+Usage::
+
+    python pipelines/benchmark.py              # full run, writes docs/benchmarks.{json,md}
+    python pipelines/benchmark.py --quick      # a few minutes; writes benchmark-quick/
+    python pipelines/benchmark.py --million    # also the 1M-vertex guest (minutes, ~GBs)
+
+Every case runs in its own subprocess (so peak memory, ``ru_maxrss``, is per
+case). For each case the script reports the median wall time of a full
+``JoinSolver(...).solve()`` (= ``igljoin.join``) and of its phases, the
+iterations to convergence, and, on the same refined guest with the same
+fixed seam (positions = our seam targets), the same initial guess and the
+same number of iterations, the time of libigl's own C++ ARAP
+(``igl.arap_precomputation`` + ``igl.arap_solve``). On the paper-sized
+samples it also checks that the accelerated result reaches the energy of a
+long plain local/global run (``acceleration=0``, tight tolerance), and it
+measures the throughput of 1 against 2 local worker processes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import json
+import multiprocessing as mp
+import os
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+import igljoin  # noqa: E402
+from igljoin import phantoms  # noqa: E402
+
+SAMPLES = [(sc, ln) for sc in ("end_to_end", "partial_patch") for ln in ("shorter", "equal", "longer")]
+
+#: The paper's own figures (§5, Intel Pentium 4, 3 GHz, 1 GB RAM).
+PAPER = {
+    "end_to_end": {"seconds": 70.0, "points": 2494, "hard": 522, "soft": 29688},
+    "partial_patch": {"seconds": 13.0, "points": 1509, "hard": 1218, "soft": 17967},
+}
+
+#: Guest vertices of the paper's partial patch at guest_resolution 1 (scales as its square).
+_PATCH_GUEST = 1305
+
+#: Relative energy gap to the long plain run that counts as "the same minimum".
+CONVERGENCE_GAP = 1e-6
+
+_BLAS_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
+
+
+# -- one case (runs inside a worker subprocess) ------------------------------------------------
+
+
+def _sample(spec: dict):
+    if spec["kind"] == "paper":
+        return phantoms.paper_sample(spec["scenario"], spec["length"])
+    r = float(np.sqrt(spec["vertices"] / _PATCH_GUEST))
+    return phantoms.paper_sample("partial_patch", "equal", guest_resolution=r)
+
+
+def _timed_join(s, **options):
+    t0 = time.perf_counter()
+    solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve, **options)
+    res = solver.solve()
+    return time.perf_counter() - t0, solver, res
+
+
+def _arap_seconds(solver, iterations: int) -> float:
+    """libigl's ARAP on our refined guest, seam fixed at our targets, same start and iterations."""
+    import igl
+
+    c = solver.corr
+    X0 = solver.initial_guess()
+    t0 = time.perf_counter()
+    data = igl.ARAPData()
+    data.max_iter = max(int(iterations), 1)
+    igl.arap_precomputation(c.V, c.F, 3, c.seam.astype(np.int32), data)
+    igl.arap_solve(c.targets, data, X0)
+    return time.perf_counter() - t0
+
+
+def run_case(spec: dict) -> dict:
+    """Time one case; returns plain JSON."""
+    t0 = time.perf_counter()
+    s = _sample(spec)
+    build = time.perf_counter() - t0
+    runs = int(spec["runs"])
+    if spec.get("warmup", True):
+        _timed_join(s)
+    walls, phases, arap = [], [], []
+    solver = res = None
+    for _ in range(runs):
+        wall, solver, res = _timed_join(s)
+        walls.append(wall)
+        phases.append(res.timings)
+    weld = None
+    if hasattr(res, "merged"):
+        t1 = time.perf_counter()
+        try:
+            res.merged  # noqa: B018 - the weld is computed on first access
+            weld = time.perf_counter() - t1
+        except igljoin.WeldError:
+            weld = None
+    for _ in range(int(spec.get("arap_runs", runs))):
+        arap.append(_arap_seconds(solver, res.iterations))
+    med = {k: statistics.median(p[k] for p in phases) for k in phases[0]}
+    run = solver.last_run
+    out = {
+        "spec": spec,
+        "build_seconds": build,
+        "guest_vertices": int(s.guest.n_vertices),
+        "counts": res.counts,
+        "converged": bool(res.converged),
+        "iterations": int(res.iterations),
+        "stats": run.stats,
+        "energy": float(res.energy[-1]),
+        "backend": solver.solver.backend,
+        "join_seconds": statistics.median(walls),
+        "join_seconds_all": walls,
+        "phases": {
+            "setup": med["select"] + med["correspond"] + med["terms"] + med["initial_guess"],
+            "factor": med["factor"],
+            "local": med["local"],
+            "back_solve": med["back_solve"],
+            "other_iterate": med["iterate"] - med["local"] - med["back_solve"],
+            "metrics": med["metrics"],
+            "weld": weld,
+        },
+        "phases_raw": med,
+        "arap_seconds": statistics.median(arap) if arap else None,
+    }
+    if out["arap_seconds"]:
+        core = med["factor"] + med["iterate"]
+        out["ratio_core"] = core / out["arap_seconds"]
+        out["ratio_full"] = out["join_seconds"] / out["arap_seconds"]
+    plain = spec.get("plain_iterations")
+    if plain:
+        t1 = time.perf_counter()
+        p = solver.solve(acceleration=0, tolerance=1e-12, max_iterations=int(plain))
+        e_plain = float(p.energy[-1])
+        gap = (out["energy"] - e_plain) / abs(e_plain)
+        out["plain"] = {
+            "iterations": int(p.iterations),
+            "converged": bool(p.converged),
+            "energy": e_plain,
+            "seconds": time.perf_counter() - t1,
+            "relative_gap": gap,
+            "ok": bool(gap <= CONVERGENCE_GAP),
+        }
+    out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return out
+
+
+def _in_subprocess(spec: dict, timeout: float) -> dict:
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", json.dumps(spec)]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    if proc.returncode != 0:
+        raise RuntimeError(f"case {spec} failed:\n{proc.stderr[-3000:]}")
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    out["subprocess_seconds"] = time.perf_counter() - t0
+    return out
+
+
+# -- throughput: 1 vs 2 local worker processes -------------------------------------------------
+
+
+def _cap_blas_threads() -> None:
+    """Worker initializer: one BLAS/OpenMP thread per worker.
+
+    The variables are also set in the parent before the pool starts, so a
+    spawned worker has them before it imports numpy; setting them here covers
+    executors that import first.
+    """
+    for var in _BLAS_VARS:
+        os.environ[var] = "1"
+
+
+def _throughput_case(args) -> float:
+    host, guest, host_curve, guest_curve = args
+    t0 = time.perf_counter()
+    igljoin.JoinSolver(host, guest, host_curve, guest_curve).solve()
+    return time.perf_counter() - t0
+
+
+def _warm(_: int) -> int:
+    return os.getpid()
+
+
+def throughput(n_cases: int) -> dict:
+    """Wall time of ``n_cases`` paper-sized joins with 1 and with 2 worker processes."""
+    cases = []
+    for i in range(n_cases):
+        sc, ln = SAMPLES[i % len(SAMPLES)]
+        s = phantoms.paper_sample(sc, ln, irregularity=0.2, seed=i)
+        cases.append(((s.host.V, s.host.F), (s.guest.V, s.guest.F), s.host_curve, s.guest_curve))
+    saved = {var: os.environ.get(var) for var in _BLAS_VARS}
+    for var in _BLAS_VARS:
+        os.environ[var] = "1"
+    out = {"cases": n_cases}
+    try:
+        ctx = mp.get_context("spawn")
+        for workers in (1, 2):
+            with cf.ProcessPoolExecutor(workers, mp_context=ctx, initializer=_cap_blas_threads) as ex:
+                # start and warm every worker (imports) outside the timed region
+                list(ex.map(_warm, range(4 * workers)))
+                list(ex.map(_throughput_case, cases[:workers]))
+                t0 = time.perf_counter()
+                per_case = list(ex.map(_throughput_case, cases))
+                wall = time.perf_counter() - t0
+            out[str(workers)] = {
+                "wall_seconds": wall,
+                "cases_per_second": n_cases / wall,
+                "median_case_seconds": statistics.median(per_case),
+            }
+    finally:
+        for var, value in saved.items():
+            if value is None:
+                os.environ.pop(var, None)
+            else:
+                os.environ[var] = value
+    out["scaling"] = out["2"]["cases_per_second"] / out["1"]["cases_per_second"]
+    return out
+
+
+# -- report ------------------------------------------------------------------------------------
+
+
+def _machine() -> dict:
+    import igl
+    import scipy
+
+    info = {
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "libigl": getattr(igl, "__version__", "2.6"),
+        "cores": os.cpu_count(),
+        "platform": platform.platform(),
+        "backends": igljoin.linsolve.available_backends(),
+    }
+    try:
+        import cholespy
+
+        info["cholespy"] = cholespy.__version__
+    except ImportError:
+        pass
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                info["cpu"] = line.split(":", 1)[1].strip()
+                break
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemTotal"):
+                info["memory_gb"] = round(int(line.split()[1]) / 2**20, 1)
+    except OSError:
+        pass
+    info["load_average_start"] = os.getloadavg()
+    return info
+
+
+def _ms(x) -> str:
+    return "—" if x is None else f"{1e3 * x:,.1f}"
+
+
+def _s(x) -> str:
+    return "—" if x is None else f"{x:,.2f}"
+
+
+def markdown(results: dict) -> str:
+    """The tables of ``docs/benchmarks.md``."""
+    lines = []
+    cases = results["cases"]
+    lines += [
+        "### Full join and its phases",
+        "",
+        "Medians over the runs, milliseconds. *setup*: validation, curve selection and "
+        "pairing, correspondence, terms, initial guess; *local*: local steps (rotations, "
+        "targets, energy, gradient); *back-solve*: back-substitutions; *metrics*: the "
+        "result's measurements; *weld*: first access to `res.merged` (not part of the join).",
+        "",
+        "| case | guest vertices | join (ms) | iterations | setup | factor | local | back-solve "
+        "| other | metrics | weld | peak RSS (MB) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for c in cases:
+        p = c["phases"]
+        lines.append(
+            f"| {c['name']} | {c['counts']['points']:,} | {_ms(c['join_seconds'])} | "
+            f"{c['iterations']} | {_ms(p['setup'])} | {_ms(p['factor'])} | {_ms(p['local'])} | "
+            f"{_ms(p['back_solve'])} | {_ms(p['other_iterate'])} | {_ms(p['metrics'])} | "
+            f"{_ms(p['weld'])} | {c['peak_rss_mb']:,.0f} |"
+        )
+    lines += [
+        "",
+        "### Against libigl's C++ ARAP",
+        "",
+        "`igl.arap_precomputation` + `igl.arap_solve` on the same refined guest, seam fixed at "
+        "our targets, same initial guess, `max_iter` = our iterations. *core* = our "
+        "factorization + iteration; *full* = our whole join. Ratios below 1 mean igljoin is faster.",
+        "",
+        "| case | iterations | ARAP (ms) | ours core (ms) | ours full (ms) | ratio core | ratio full |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for c in cases:
+        core = c["phases_raw"]["factor"] + c["phases_raw"]["iterate"]
+        lines.append(
+            f"| {c['name']} | {c['iterations']} | {_ms(c.get('arap_seconds'))} | {_ms(core)} | "
+            f"{_ms(c['join_seconds'])} | {_s(c.get('ratio_core'))} | {_s(c.get('ratio_full'))} |"
+        )
+    checked = [c for c in cases if "plain" in c]
+    if checked:
+        lines += [
+            "",
+            "### Convergence: accelerated against a long plain run",
+            "",
+            "Plain local/global (`acceleration=0`, `tolerance=1e-12`) from the same start. "
+            "Gap = (E_accelerated − E_plain) / E_plain; it must be ≤ 1e-6 (negative: the "
+            "accelerated run ended lower).",
+            "",
+            "| case | accelerated iterations | plain iterations | plain converged | plain (s) "
+            "| gap | ok |",
+            "|---|---:|---:|---|---:|---:|---|",
+        ]
+        for c in checked:
+            p = c["plain"]
+            lines.append(
+                f"| {c['name']} | {c['iterations']} | {p['iterations']} | "
+                f"{'yes' if p['converged'] else 'no'} | {p['seconds']:.1f} | "
+                f"{p['relative_gap']:.1e} | {'yes' if p['ok'] else '**no**'} |"
+            )
+    lines += [
+        "",
+        "### The paper's figures beside ours",
+        "",
+        "| scenario | paper: points / hard / soft | paper time | ours: points / hard / soft "
+        "| ours (ms, median of the three lengths) |",
+        "|---|---|---:|---|---:|",
+    ]
+    for sc, ref in PAPER.items():
+        mine = [c for c in cases if c["spec"].get("scenario") == sc]
+        if not mine:
+            continue
+        eq = next((c for c in mine if c["spec"]["length"] == "equal"), mine[0])
+        k = eq["counts"]
+        lines.append(
+            f"| {sc} | {ref['points']:,} / {ref['hard']:,} / {ref['soft']:,} | "
+            f"{ref['seconds']:.0f} s (Pentium 4) | {k['points']:,} / {k['hard']:,} / "
+            f"{k['soft']:,} | {_ms(statistics.median(c['join_seconds'] for c in mine))} |"
+        )
+    tp = results.get("throughput")
+    if tp:
+        lines += [
+            "",
+            "### Throughput: local worker processes",
+            "",
+            f"{tp['cases']} paper-sized joins (the six samples with jitter), "
+            "`ProcessPoolExecutor` with the spawn context, one BLAS thread per worker, "
+            "workers started and warmed before timing.",
+            "",
+            "| workers | wall (s) | joins / s | median join in worker (ms) |",
+            "|---:|---:|---:|---:|",
+        ]
+        for w in ("1", "2"):
+            t = tp[w]
+            lines.append(
+                f"| {w} | {t['wall_seconds']:.2f} | {t['cases_per_second']:.1f} | "
+                f"{_ms(t['median_case_seconds'])} |"
+            )
+        lines.append(f"\nScaling 2 vs 1 workers: **{tp['scaling']:.2f}×**.")
+    paper = [c for c in cases if c["spec"]["kind"] == "paper"]
+    if paper:
+        lines += [
+            "",
+            f"Median full join over the six paper samples: "
+            f"**{_ms(statistics.median(c['join_seconds'] for c in paper))} ms**.",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def _name(spec: dict) -> str:
+    if spec["kind"] == "paper":
+        return f"{spec['scenario']}/{spec['length']}"
+    v = spec["vertices"]
+    return f"patch {v // 1000:,}k" if v < 10**6 else f"patch {v / 1e6:g}M"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="small run (a few minutes)")
+    ap.add_argument("--million", action="store_true", help="also the 1M-vertex guest")
+    ap.add_argument("--runs", type=int, help="timed runs per paper sample (default 7, quick 3)")
+    ap.add_argument(
+        "--plain-iterations",
+        type=int,
+        help="iteration cap of the long plain run (default 30000, quick 3000)",
+    )
+    ap.add_argument("--cases", type=int, help="throughput cases (default 20, quick 8)")
+    ap.add_argument("--sizes", help="large guests, comma-separated vertex counts")
+    ap.add_argument("--out", help="output folder (default docs/, quick: benchmark-quick/)")
+    ap.add_argument("--worker", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.worker:
+        print(json.dumps(run_case(json.loads(args.worker))))
+        return 0
+    runs = args.runs or (3 if args.quick else 7)
+    plain = args.plain_iterations or (3000 if args.quick else 30000)
+    n_cases = args.cases or (8 if args.quick else 20)
+    if args.sizes:
+        sizes = [int(float(v)) for v in args.sizes.split(",") if v]
+    else:
+        sizes = [10_000] if args.quick else [10_000, 100_000]
+    if args.million:
+        sizes.append(1_000_000)
+    out_dir = Path(args.out) if args.out else ROOT / ("benchmark-quick" if args.quick else "docs")
+    specs = [
+        {"kind": "paper", "scenario": sc, "length": ln, "runs": runs, "plain_iterations": plain}
+        for sc, ln in SAMPLES
+    ]
+    for v in sizes:
+        big = v >= 100_000
+        specs.append(
+            {
+                "kind": "patch",
+                "vertices": v,
+                "runs": 1 if big else 3,
+                "arap_runs": 1,
+                "warmup": not big,
+            }
+        )
+    results = {"machine": _machine(), "cases": []}
+    for spec in specs:
+        name = _name(spec)
+        print(f"{name} ...", end=" ", flush=True)
+        c = _in_subprocess(spec, timeout=7200)
+        c["name"] = name
+        results["cases"].append(c)
+        gap = c.get("plain", {}).get("relative_gap")
+        print(
+            f"join {_ms(c['join_seconds'])} ms, {c['iterations']} it, ARAP ratio "
+            f"{_s(c.get('ratio_full'))}, peak {c['peak_rss_mb']:,.0f} MB"
+            + (f", gap {gap:.1e}" if gap is not None else ""),
+            flush=True,
+        )
+    if n_cases > 0:
+        print("throughput ...", end=" ", flush=True)
+        results["throughput"] = throughput(n_cases)
+        print(f"{results['throughput']['scaling']:.2f}x", flush=True)
+    results["machine"]["load_average_end"] = os.getloadavg()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "benchmarks.json").write_text(json.dumps(results, indent=1))
+    table = markdown(results)
+    md = out_dir / "benchmarks.md"
+    if md.exists() and "<!-- benchmark tables -->" in md.read_text():
+        head = md.read_text().split("<!-- benchmark tables -->")[0]
+        md.write_text(head + "<!-- benchmark tables -->\n\n" + table)
+    else:
+        md.write_text("# Benchmarks\n\n<!-- benchmark tables -->\n\n" + table)
+    print(table)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,236 @@
+"""The ``igljoin`` console script, run for real in a subprocess."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import igljoin
+from igljoin import phantoms
+
+from .cuts import sample_mesh_dir
+from .test_clean import corrupt
+
+IGLJOIN = Path(sys.executable).parent / "igljoin"
+COMMANDS = ("join", "batch", "clean", "info", "demo", "render", "inspect")
+
+
+def run(*args, timeout=300) -> subprocess.CompletedProcess:
+    assert IGLJOIN.exists(), "console script missing: run .venv/bin/pip install -e ."
+    return subprocess.run(
+        [str(IGLJOIN), *map(str, args)], capture_output=True, text=True, timeout=timeout
+    )
+
+
+def assert_one_line_error(proc: subprocess.CompletedProcess, code: int, text: str) -> None:
+    assert proc.returncode == code, proc.stderr
+    assert "Traceback" not in proc.stderr
+    last = proc.stderr.strip().splitlines()[-1]
+    assert text in last, last
+    if code == 1:  # library errors: exactly one line, no usage block
+        assert proc.stderr.strip().count("\n") == 0 and last.startswith("igljoin: error: ")
+
+
+@pytest.fixture(scope="module")
+def patch_files(tmp_path_factory) -> tuple[Path, Path]:
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.4)
+    root = tmp_path_factory.mktemp("files")
+    return (
+        igljoin.write_mesh(root / "host.ply", s.host),
+        igljoin.write_mesh(root / "guest.obj", s.guest),
+    )
+
+
+# --------------------------------------------------------------------------- help
+
+
+def test_top_level_help_lists_every_command():
+    proc = run("--help")
+    assert proc.returncode == 0
+    for command in COMMANDS:
+        assert f"\n    {command} " in proc.stdout
+    assert "examples:" in proc.stdout
+    assert run("--version").stdout.strip() == f"igljoin {igljoin.__version__}"
+
+
+@pytest.mark.parametrize(
+    "command, expected",
+    [
+        ("join", ["HOST GUEST", "--host-loop K", "--guest-start V", "--no-smooth", "--option"]),
+        ("batch", ["CASES", "--workers N", "--scheduler ADDRESS", "--dask-local N", "--resume"]),
+        ("clean", ["IN", "--close-holes", "--keep-loop K", "--resample EDGE"]),
+        ("info", ["MESH", "--json"]),
+        ("demo", ["--out DIR", "out/demo"]),
+        ("render", ["CASE | HOST GUEST", "--view {side,along,both}"]),
+        ("inspect", ["CASE | HOST GUEST", "--host-loop K"]),
+    ],
+)
+def test_subcommand_help(command, expected):
+    proc = run(command, "--help")
+    assert proc.returncode == 0
+    assert proc.stdout.startswith(f"usage: igljoin {command} ")
+    for text in expected:
+        assert text in proc.stdout
+    assert max(len(line) for line in proc.stdout.splitlines()) <= 100  # wrapped
+
+
+def test_usage_errors_exit_2():
+    proc = run()
+    assert proc.returncode == 2 and "usage: igljoin" in proc.stderr
+    assert_one_line_error(run("frobnicate"), 2, "invalid choice: 'frobnicate'")
+    assert_one_line_error(run("join", "a.ply"), 2, "the following arguments are required")
+    assert_one_line_error(
+        run("join", "a.ply", "b.ply", "-o", "x", "--host-start", "1,2"),
+        2,
+        "'1,2' is neither a vertex index",
+    )
+    assert_one_line_error(
+        run("batch", "c", "-o", "x", "--workers", "2", "--dask-local", "2"),
+        2,
+        "not allowed with argument",
+    )
+
+
+# --------------------------------------------------------------------------- info
+
+
+def test_info_on_a_real_scan():
+    scan = sample_mesh_dir() / "bunny10k_textured.obj"
+    proc = run("info", scan)
+    assert proc.returncode == 0
+    assert "5051 vertices, 9999 faces" in proc.stdout
+    assert "boundary loops: 5" in proc.stdout and "loop 0: 38 vertices" in proc.stdout
+    assert "sliver faces: 1" in proc.stdout
+    doc = json.loads(run("info", scan, "--json").stdout)
+    assert [lp["size"] for lp in doc["loops"]] == [38, 22, 22, 19, 8]
+    assert doc["components"] == 1 and doc["problems"]["sliver_faces"] == 1
+
+
+def test_info_lists_the_problems_of_a_broken_mesh(tmp_path):
+    bad = corrupt(igljoin.read_mesh(sample_mesh_dir() / "bunny10k_textured.obj"))
+    path = igljoin.write_mesh(tmp_path / "broken.ply", bad)
+    proc = run("info", path)
+    assert proc.returncode == 0
+    for line in (
+        "degenerate faces: 1",
+        "duplicate faces: 2",
+        "non manifold edges: 1",
+        "non manifold vertices: 1",
+        "unreferenced vertices: 5",
+        "duplicate vertices: 3",
+        "loops are not defined while edges are non-manifold",
+    ):
+        assert line in proc.stdout
+
+
+# --------------------------------------------------------------------------- join
+
+
+def test_join_files(patch_files, tmp_path):
+    host, guest = patch_files
+    out = tmp_path / "joined"
+    proc = run("join", host, guest, "-o", out, "--host-loop", "0")
+    assert proc.returncode == 0, proc.stderr
+    assert "converged: True" in proc.stdout and "crease mean" in proc.stdout
+    assert sorted(p.name for p in out.iterdir()) == [
+        "guest.ply",
+        "merged.ply",
+        "report.json",
+        "timings.json",
+    ]
+    flags = "--host-start 0 --no-smooth -O smooth_weight=5 -O smooth_mode=paper --json"
+    proc = run("join", host, guest, "-o", tmp_path / "j2", *flags.split())
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads(proc.stdout)
+    assert doc["summary"]["status"] == "ok" and doc["summary"]["converged"] is True
+    report = json.loads((tmp_path / "j2" / "report.json").read_text())
+    assert report["options"]["smooth"] is False and report["options"]["smooth_mode"] == "paper"
+    assert report["spec"]["host_curve"] == {"start": 0}
+
+
+def test_join_with_cleanup_and_resample(tmp_path):
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.4, guest_resolution=0.2)
+    host = igljoin.write_mesh(tmp_path / "host.ply", s.host)
+    guest = igljoin.write_mesh(tmp_path / "guest.off", s.guest)
+    flags = "--host-loop 0 --cleanup --resample --json".split()
+    proc = run("join", host, guest, "-o", tmp_path / "o", *flags)
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert report["cleanup"]["guest"]["total"] == 0  # the phantom is clean
+    assert report["resample"]["after"]["vertices"] > 10 * s.guest.n_vertices
+    flags = "--host-loop 0 --resample --guest-start 0".split()
+    proc = run("join", host, guest, "-o", tmp_path / "o2", *flags)
+    assert_one_line_error(proc, 2, "give the guest curve by loop index or by points")
+
+
+def test_join_errors_are_one_line_and_leave_out_alone(patch_files, tmp_path):
+    host, guest = patch_files
+    assert_one_line_error(
+        run("join", tmp_path / "nope.ply", guest, "-o", tmp_path / "o"), 1, "mesh file not found"
+    )
+    out = tmp_path / "o"
+    proc = run("join", host, guest, "-o", out, "--host-loop", "7")
+    assert_one_line_error(proc, 1, "host_curve: loop 7 does not exist")
+    proc = run("join", host, guest, "-o", out)
+    assert_one_line_error(proc, 1, "say which to join")
+    assert not out.exists() and list(tmp_path.iterdir()) == []  # no partial output
+    proc = run("join", host, guest, "-o", out, "-O", "smoth=1")
+    assert_one_line_error(proc, 2, "unknown options 'smoth'; valid keys are smooth")
+
+
+# --------------------------------------------------------------------------- clean
+
+
+def test_clean_a_broken_file(tmp_path):
+    bad = corrupt(igljoin.read_mesh(sample_mesh_dir() / "bunny10k_textured.obj"))
+    src = igljoin.write_mesh(tmp_path / "broken.ply", bad)
+    before = src.read_bytes()
+    out = tmp_path / "fixed.ply"
+    proc = run("clean", src, "-o", out, "--close-holes", "--keep-loop", "0", "--json")
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads(proc.stdout)
+    assert doc["clean"]["fixes"]["duplicate_vertices"] == 3 and doc["clean"]["after"]["ok"]
+    assert src.read_bytes() == before  # the input is never touched
+    info = json.loads(run("info", out, "--json").stdout)
+    assert info["ok"] and [lp["size"] for lp in info["loops"]] == [38]
+    proc = run("clean", src, "-o", tmp_path / "f2.ply")
+    assert proc.returncode == 0 and "duplicate faces: 2" in proc.stdout
+    assert_one_line_error(run("clean", src, "-o", src), 2, "is the input file")
+    garbage = tmp_path / "garbage.obj"
+    garbage.write_text("v 1 2\n")
+    assert_one_line_error(run("clean", garbage, "-o", tmp_path / "g.ply"), 1, "garbage.obj")
+
+
+# --------------------------------------------------------------------------- batch, demo, viz
+
+
+def test_batch_on_a_folder_without_cases(tmp_path):
+    assert_one_line_error(run("batch", tmp_path, "-o", tmp_path / "o"), 1, "no case folders")
+
+
+def test_demo_writes_the_paper_table(tmp_path):
+    out = tmp_path / "demo"
+    proc = run("demo", "--out", out, "--resolution", "0.3", "--no-progress", "--json")
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads(proc.stdout)
+    assert Path(doc["paths"]["table_md"]).is_file() and doc["claims"]
+
+
+@pytest.mark.skipif(importlib.util.find_spec("polyscope") is None, reason="viz extra")
+def test_render_a_case_folder(patch_files, tmp_path):
+    host, guest = patch_files
+    case = tmp_path / "case"
+    case.mkdir()
+    for f in (host, guest):
+        (case / f.name).write_bytes(f.read_bytes())
+    (case / "join.toml").write_text("[host_curve]\nloop = 0\n")
+    png = tmp_path / "picture.png"
+    proc = run("render", case, "-o", png, "--view", "both")
+    assert proc.returncode == 0, proc.stderr
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert_one_line_error(run("render", host, "-o", png), 2, "give a case folder")

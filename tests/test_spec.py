@@ -1,0 +1,245 @@
+"""Case folders and join.toml (igljoin.spec): parsing, validation, confinement."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import igljoin
+from igljoin import phantoms
+from igljoin.spec import CaseSpec, discover_cases, file_sha256, load_case
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def sample():
+    return phantoms.paper_sample("partial_patch", "equal", resolution=0.4)
+
+
+def make_case(root: Path, sample, toml: str | None = "", name: str = "case") -> Path:
+    folder = root / name
+    folder.mkdir(parents=True)
+    igljoin.write_mesh(folder / "host.ply", sample.host)
+    igljoin.write_mesh(folder / "guest.obj", sample.guest)
+    if toml is not None:
+        (folder / "join.toml").write_text(toml, encoding="utf-8")
+    return folder
+
+
+def test_the_documented_examples_load(tmp_path, sample):
+    doc = (ROOT / "docs" / "pipelines.md").read_text(encoding="utf-8")
+    complete, resampled = re.findall(r"```toml\n(.*?)```", doc, re.S)
+    folder = make_case(tmp_path, sample, complete)
+    np.save(folder / "stiffness.npy", np.full(sample.guest.n_vertices, 2.0))
+    spec = load_case(folder)
+    assert spec.name == "case" and spec.host == folder.resolve() / "host.ply"
+    assert spec.host_curve == igljoin.Curve(loop=0)
+    np.testing.assert_array_equal(spec.guest_curve.start, [21.5, 0.25, 3.0])
+    assert spec.options["smooth_weight"] == 10.0
+    np.testing.assert_array_equal(spec.options["stiffness"], 2.0)
+    assert spec.stiffness_file == folder.resolve() / "stiffness.npy"
+    assert spec.join_options().stiffness_on == "vertex"
+    assert spec.cleanup.close_holes and spec.cleanup.max_hole_edges == 30
+    assert set(spec.input_files()) == {"host", "guest", "spec", "stiffness"}
+    spec = load_case(make_case(tmp_path, sample, resampled, "resampled"))
+    assert spec.resample.target_edge is None and spec.resample.iterations == 10
+    assert spec.guest_curve == igljoin.Curve(loop=0)
+
+
+def test_defaults_without_join_toml(tmp_path, sample):
+    spec = load_case(make_case(tmp_path, sample, toml=None))
+    assert spec.spec_file is None and spec.host_curve == igljoin.Curve()
+    assert spec.cleanup is None and spec.resample is None
+    assert spec.join_options() == igljoin.JoinOptions()
+
+
+def test_curves_in_every_form(tmp_path, sample):
+    toml = (
+        "[host_curve]\nindices = [0, 1, 2, 3]\nclosed = false\n\n"
+        "[guest_curve]\nstart = 3\nend = [1.0, 2, 3.5]\nvia = 7\n"
+    )
+    spec = load_case(make_case(tmp_path, sample, toml))
+    np.testing.assert_array_equal(spec.host_curve.indices, [0, 1, 2, 3])
+    assert spec.host_curve.closed is False
+    assert spec.guest_curve.start == 3 and spec.guest_curve.via == 7
+    assert spec.guest_curve.end.dtype == np.float64
+
+
+def test_options_shorthands(tmp_path, sample):
+    toml = "[options]\ncleanup = true\nresample = 0.75\nsmooth = false\n"
+    spec = load_case(make_case(tmp_path, sample, toml))
+    assert spec.cleanup == igljoin.spec.CleanupSpec()
+    assert spec.resample.target_edge == 0.75
+    assert spec.join_options().smooth is False
+    spec = load_case(make_case(tmp_path, sample, "[options.cleanup]\nenabled = false\n", "off"))
+    assert spec.cleanup is None
+
+
+@pytest.mark.parametrize(
+    "toml, match",
+    [
+        ("hots = 'host.ply'\n", r"unknown keys 'hots'; valid keys are description, host, guest"),
+        ("[host_curve]\nloops = 0\n", r"unknown curve keys 'loops'; valid keys are indices"),
+        ("[options]\nsmoth = true\n", r"unknown options 'smoth'; valid keys are smooth, "),
+        ("[options.cleanup]\nholes = true\n", r"unknown cleanup keys 'holes'.*close_holes"),
+        ("[options.resample]\nedge = 1.0\n", r"unknown resample keys 'edge'.*target_edge"),
+        ("[host_curve]\nloop = 'zero'\n", r"loop = 'zero' must be a loop index"),
+        ("[host_curve]\nstart = [1, 2]\n", r"start = \[1, 2\] must be a vertex index"),
+        ("[host_curve]\nindices = []\n", r"indices must be a non-empty list"),
+        ("[host_curve]\nindices = [1, 2]\nstart = 1\n", r"either indices or start"),
+        ("[options]\nsmooth_weight = -1.0\n", r"smooth_weight=-1.0 is out of range"),
+        ("[options]\nstiffness = [1, 'a']\n", r"stiffness must be a list of numbers"),
+        ("[options.resample]\ntarget_edge = -2\n", r"target_edge = -2 must be a positive"),
+        ("host_curve = 3\n", r"\[host_curve\] must be a table"),
+        ("description = 5\n", r"description must be a string"),
+        ("[options\n", r"not valid TOML"),
+    ],
+)
+def test_invalid_specs_name_the_problem(tmp_path, sample, toml, match):
+    folder = make_case(tmp_path, sample, toml)
+    with pytest.raises(igljoin.SpecError, match=match) as info:
+        load_case(folder)
+    assert "join.toml" in str(info.value)  # every message names the file
+
+
+def test_spec_is_data_never_evaluated(tmp_path, sample):
+    marker = tmp_path / "pwned"
+    toml = f"[options]\nsmooth_mode = \"__import__('os').system('touch {marker}')\"\n"
+    with pytest.raises(igljoin.SpecError, match="smooth_mode"):
+        load_case(make_case(tmp_path, sample, toml))
+    assert not marker.exists()
+
+
+def test_resample_refuses_index_curves_and_stiffness(tmp_path, sample):
+    folder = make_case(tmp_path, sample, "[guest_curve]\nstart = 4\n[options]\nresample = true\n")
+    with pytest.raises(igljoin.SpecError, match="loop index or by points"):
+        load_case(folder)
+    folder = make_case(
+        tmp_path, sample, "[options]\nresample = true\nstiffness = [1.0, 2.0]\n", "stiff"
+    )
+    with pytest.raises(igljoin.SpecError, match="resample remeshes the guest"):
+        load_case(folder)
+    # a loop index or points are fine
+    folder = make_case(
+        tmp_path,
+        sample,
+        "[guest_curve]\nstart = [1.0, 2.0, 3.0]\n[options]\nresample = true\n",
+        "ok",
+    )
+    assert load_case(folder).resample is not None
+
+
+# --------------------------------------------------------------------------- confinement
+
+
+def test_paths_may_not_leave_the_case_folder(tmp_path, sample):
+    other = make_case(tmp_path, sample, None, "other")
+    for value in ("../other/host.ply", str(other / "host.ply")):
+        folder = make_case(tmp_path, sample, f'host = "{value}"\n', f"c{len(value)}")
+        with pytest.raises(igljoin.SpecError, match="outside the case folder") as info:
+            load_case(folder)
+        assert value in str(info.value) or repr(value) in str(info.value)
+
+
+def test_symlinks_pointing_outside_are_refused(tmp_path, sample):
+    other = make_case(tmp_path, sample, None, "other")
+    folder = make_case(tmp_path, sample, None, "linked")
+    (folder / "host.ply").unlink()
+    os.symlink(other / "host.ply", folder / "host.ply")
+    with pytest.raises(igljoin.SpecError, match=r"host.ply.*outside the case folder"):
+        load_case(folder)
+    # a stiffness file linked from outside, and a join.toml linked from outside
+    folder = make_case(tmp_path, sample, '[options]\nstiffness = "k.npy"\n', "klink")
+    np.save(other / "k.npy", np.ones(sample.guest.n_vertices))
+    os.symlink(other / "k.npy", folder / "k.npy")
+    with pytest.raises(igljoin.SpecError, match=r"'k.npy'.*outside the case folder"):
+        load_case(folder)
+    folder = make_case(tmp_path, sample, None, "speclink")
+    (other / "join.toml").write_text("[host_curve]\nloop = 0\n")
+    os.symlink(other / "join.toml", folder / "join.toml")
+    with pytest.raises(igljoin.SpecError, match="outside the case folder"):
+        load_case(folder)
+    # a link that stays inside the folder is fine
+    folder = make_case(tmp_path, sample, 'host = "h.ply"\n', "inside")
+    os.symlink(folder / "host.ply", folder / "h.ply")
+    assert load_case(folder).host == (folder / "host.ply").resolve()
+
+
+def test_missing_and_ambiguous_meshes(tmp_path, sample):
+    folder = make_case(tmp_path, sample, None)
+    (folder / "guest.obj").unlink()
+    with pytest.raises(igljoin.SpecError, match="no guest mesh"):
+        load_case(folder)
+    igljoin.write_mesh(folder / "guest.off", sample.guest)
+    igljoin.write_mesh(folder / "guest.ply", sample.guest)
+    with pytest.raises(igljoin.SpecError, match=r"several guest meshes \(guest.off, guest.ply\)"):
+        load_case(folder)
+    (folder / "join.toml").write_text('guest = "guest.ply"\nhost = "nope.ply"\n')
+    with pytest.raises(igljoin.SpecError, match="'nope.ply': no such file"):
+        load_case(folder)
+    (folder / "join.toml").write_text('guest = "guest.ply"\n[options]\nstiffness = "k.json"\n')
+    (folder / "k.json").write_text("[1]")
+    with pytest.raises(igljoin.SpecError, match="unsupported suffix"):
+        load_case(folder)
+
+
+def test_stiffness_text_files(tmp_path, sample):
+    folder = make_case(tmp_path, sample, '[options]\nstiffness = "k.csv"\n')
+    k = np.linspace(1, 2, sample.guest.n_vertices)
+    np.savetxt(folder / "k.csv", k[None], delimiter=",", fmt="%.17g")
+    np.testing.assert_array_equal(load_case(folder).options["stiffness"], k)
+    (folder / "k.csv").write_text("1,2,oops\n")
+    with pytest.raises(igljoin.SpecError, match="cannot read the stiffness file k.csv"):
+        load_case(folder)
+
+
+# --------------------------------------------------------------------------- identity
+
+
+def test_spec_json_and_hashes_do_not_depend_on_the_folder_location(tmp_path, sample):
+    a = make_case(tmp_path / "a", sample, "[host_curve]\nloop = 0\n")
+    b = tmp_path / "elsewhere" / "deeper" / "case"
+    shutil.copytree(a, b)
+    sa, sb = load_case(a), load_case(b)
+    assert sa.to_json() == sb.to_json()
+    assert sa.input_hashes() == sb.input_hashes()
+    assert sa.input_hashes()["host"] == {
+        "file": "host.ply",
+        "sha256": file_sha256(a / "host.ply"),
+    }
+    # every effective option is listed, defaults included
+    assert sa.to_json()["options"] == igljoin.JoinOptions().to_json()
+
+
+def test_discover_cases(tmp_path, sample):
+    for name in ("b", "a", ".hidden", "_skip"):
+        make_case(tmp_path, sample, None, name)
+    (tmp_path / "notes").mkdir()
+    (tmp_path / "readme.txt").write_text("x")
+    assert [p.name for p in discover_cases(tmp_path)] == ["a", "b"]
+    assert discover_cases(tmp_path / "a") == [tmp_path / "a"]  # a single case folder
+    with pytest.raises(igljoin.SpecError, match="no case folders found"):
+        discover_cases(tmp_path / "notes")
+    with pytest.raises(igljoin.SpecError, match="not a folder"):
+        discover_cases(tmp_path / "readme.txt")
+
+
+def test_case_from_arguments(tmp_path, sample):
+    folder = make_case(tmp_path, sample, None)
+    spec = CaseSpec.make(
+        folder / "host.ply",
+        folder / "guest.obj",
+        {"loop": 0},
+        None,
+        {"smooth": False, "cleanup": {"close_holes": True}},
+    )
+    assert spec.name == "guest" and spec.folder is None
+    assert spec.host_curve.loop == 0 and spec.cleanup.close_holes
+    with pytest.raises(igljoin.SpecError, match="unknown options 'bogus'"):
+        CaseSpec.make(folder / "host.ply", folder / "guest.obj", options={"bogus": 1})
