@@ -506,6 +506,7 @@ def aortic_wall(
     irregularity: float = 0.0,
     seed: int = 0,
     name: str = "aortic wall",
+    full_turn: bool = False,
 ) -> Mesh:
     """A piece of aortic wall (cylinder around the z axis) with an elliptic hole.
 
@@ -536,6 +537,10 @@ def aortic_wall(
         Seed of ``numpy.random.default_rng``.
     name : str, keyword-only
         Mesh name.
+    full_turn : bool, keyword-only
+        Close the wall all the way round (``arc_deg`` is then ignored): a
+        vessel with a side opening, three boundary loops (both ends and the
+        opening). Used for the coronary artery of the bypass-graft phantom.
 
     Returns
     -------
@@ -556,8 +561,8 @@ def aortic_wall(
     """
     radius = _positive(radius, "aortic_wall: radius")
     height = _positive(height, "aortic_wall: height")
-    arc = _positive(arc_deg, "aortic_wall: arc_deg")
-    if arc >= 360.0:
+    arc = 360.0 if full_turn else _positive(arc_deg, "aortic_wall: arc_deg")
+    if arc >= 360.0 and not full_turn:
         raise OptionsError(f"aortic_wall: arc_deg must be below 360, got {arc_deg}")
     a_v = _positive(hole_axes[0], "aortic_wall: hole_axes[0]")
     a_u = _positive(hole_axes[1], "aortic_wall: hole_axes[1]")
@@ -597,9 +602,34 @@ def aortic_wall(
     P, F = _triangulate(P_in, E, np.zeros((1, 2)), f"pq30a{max_area:.10f}YQ", "aortic_wall")
     movable = np.arange(P.shape[0]) >= P_in.shape[0]
     P = _disc_jitter(P, F, movable, irregularity, seed)
+    if full_turn:
+        P, F = _close_seam(P, F, half_u)
     phi = P[:, 0] / radius
     V = np.column_stack([radius * np.cos(phi), radius * np.sin(phi), P[:, 1]])
     return Mesh(V, F, name=name)
+
+
+def _close_seam(P: np.ndarray, F: np.ndarray, half_u: float) -> tuple[np.ndarray, np.ndarray]:
+    """Glue the ``u = +half_u`` side of an unrolled wall onto its ``u = -half_u`` side.
+
+    Both sides carry the same ``v`` samples (no Steiner points on the
+    boundary), so each right-side vertex has a left-side twin. Returns the
+    vertices without the right side, shape (n', 2), and the re-indexed faces.
+    """
+    tol = 1e-9 * half_u
+    right = np.flatnonzero(np.abs(P[:, 0] - half_u) <= tol)
+    left = np.flatnonzero(np.abs(P[:, 0] + half_u) <= tol)
+    order = np.argsort(P[left, 1])
+    pos = np.searchsorted(P[left[order], 1], P[right, 1])
+    twin = left[order][np.clip(pos, 0, len(left) - 1)]
+    if not np.allclose(P[twin, 1], P[right, 1], atol=tol):
+        raise MeshError("aortic_wall: the two sides of a full-turn wall do not match")
+    remap = np.arange(len(P))
+    remap[right] = twin
+    keep = np.ones(len(P), dtype=bool)
+    keep[right] = False
+    new_id = np.cumsum(keep) - 1
+    return P[keep], new_id[remap[F]]
 
 
 def flat_patch(
@@ -985,3 +1015,175 @@ def paper_samples(**kw) -> list[Sample]:
         for scenario in ("end_to_end", "partial_patch")
         for length in ("shorter", "equal", "longer")
     ]
+
+
+# -- several seams and stiffness maps ------------------------------------------------------
+
+
+def curved_tube(
+    centerline: np.ndarray,
+    radius: float,
+    n_around: int,
+    *,
+    name: str = "graft",
+) -> Mesh:
+    """A tube of constant radius swept along a planar centre line.
+
+    Parameters
+    ----------
+    centerline : ndarray, shape (k, 3)
+        Ring centres, ``k >= 2``, in a plane containing the y axis direction
+        as its normal (the x–z plane): rings lie in planes perpendicular to
+        the curve and the binormal is +y.
+    radius : float
+    n_around : int
+        Vertices per ring.
+    name : str
+
+    Returns
+    -------
+    Mesh
+        Vertex ``k * n_around + j`` is on ring ``k``; rings 0 and ``k − 1``
+        are the two open ends; normals point away from the centre line.
+    """
+    C = np.asarray(centerline, dtype=np.float64)
+    radius = _positive(radius, "curved_tube: radius")
+    n_around = _int_at_least(n_around, 3, "curved_tube: n_around")
+    T = np.gradient(C, axis=0)
+    T /= np.linalg.norm(T, axis=1, keepdims=True)
+    B = np.array([0.0, 1.0, 0.0])
+    N = np.cross(B, T)
+    N /= np.linalg.norm(N, axis=1, keepdims=True)
+    theta = 2.0 * np.pi * np.arange(n_around) / n_around
+    ring = np.cos(theta)[None, :, None] * N[:, None, :] + np.sin(theta)[None, :, None] * B
+    V = (C[:, None, :] + radius * ring).reshape(-1, 3)
+    F = _grid_faces(len(C), n_around, periodic=True)
+    # outward: the face normal must point away from its ring's centre
+    c = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    centre = C[F[:, 0] // n_around]
+    if np.einsum("ij,ij->i", c, V[F].mean(axis=1) - centre).mean() < 0:
+        F = F[:, ::-1].copy()
+    return Mesh(V, F, name=name)
+
+
+def _bezier(P: np.ndarray, n: int) -> np.ndarray:
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    return (
+        (1 - t) ** 3 * P[0] + 3 * (1 - t) ** 2 * t * P[1] + 3 * (1 - t) * t**2 * P[2] + t**3 * P[3]
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class MultiSeamSample:
+    """A guest joined along several seams (e.g. a bypass graft sewn at both ends).
+
+    Attributes
+    ----------
+    name : str
+    hosts : list of Mesh
+        The rigid meshes (one per seam here).
+    guest : Mesh
+    seams : list of (int, ndarray, Curve)
+        ``(host index, host curve, guest curve)`` per seam; host curves are
+        ordered host loop vertices, guest curves name a guest loop.
+    description : str
+    """
+
+    name: str
+    hosts: list
+    guest: Mesh
+    seams: list
+    description: str
+
+
+def bypass_graft_sample(*, resolution: float = 1.0) -> MultiSeamSample:
+    """A coronary bypass graft to be sewn to the aorta and to a coronary artery.
+
+    The host is two meshes: a piece of aortic wall (radius 15 mm) with a
+    round hole of radius 3 mm, and a coronary artery (radius 2 mm) with an
+    elliptic side opening facing the aorta (end-to-side anastomosis). The
+    guest is a curved graft tube (radius 3 mm) swept along a cubic curve
+    from near the aortic hole to near the coronary opening, placed 1.5 mm
+    short of both so that both seams must be pulled into place.
+
+    Parameters
+    ----------
+    resolution : float
+        Point-count scale.
+
+    Returns
+    -------
+    MultiSeamSample
+    """
+    n_hole = _count(64, resolution, 12)
+    aorta = aortic_wall(
+        15.0, 30.0, 80.0, (3.0, 3.0), n_hole, target_edge=1.2 / resolution, name="aorta"
+    )
+    aorta = Mesh(aorta.V + [0.0, 0.0, 8.0], aorta.F, name="aorta")
+    perimeter = float(ellipse_perimeter(3.0, 3.0))  # the graft's end circle
+    # an opening elongated along the artery, as long (round) as the graft's end
+    scale = ellipse_scale_for_perimeter(1.0, 0.55, perimeter)
+    coronary = aortic_wall(
+        2.0,
+        30.0,
+        360.0,
+        (scale, 0.55 * scale),
+        n_hole,
+        target_edge=0.6 / resolution,
+        full_turn=True,
+        name="coronary artery",
+    )
+    # the opening faces -x (towards the aorta): turn the artery half a turn about z
+    R = _rotation("z", 180.0)
+    coronary = Mesh(coronary.V @ R.T + [30.0, 0.0, -10.0], coronary.F, name="coronary artery")
+    start = np.array([16.5, 0.0, 8.0])  # 1.5 mm outside the aortic hole
+    end = np.array([26.5, 0.0, -10.0])  # 1.5 mm short of the coronary opening
+    ctrl = np.array([start, start + [9.0, 0.0, 0.0], end - [9.0, 0.0, 0.0], end])
+    graft = curved_tube(
+        _bezier(ctrl, _count(40, resolution, 6)), 3.0, _count(56, resolution, 8), name="graft"
+    )
+    host_loops = [boundary_loops(aorta.F), boundary_loops(coronary.F)]
+    hole_aorta = next(lp for lp in host_loops[0] if 0 in lp)
+    hole_coronary = next(lp for lp in host_loops[1] if 0 in lp)
+    n_around = _count(56, resolution, 8)
+    return MultiSeamSample(
+        name="bypass_graft",
+        hosts=[aorta, coronary],
+        guest=graft,
+        seams=[
+            (0, hole_aorta, Curve(loop=_loop_through(graft.F, 0))),
+            (1, hole_coronary, Curve(loop=_loop_through(graft.F, graft.n_vertices - n_around))),
+        ],
+        description=(
+            "Coronary bypass: a curved graft (radius 3 mm) sewn to a 3 mm hole in the aortic "
+            "wall and to an elliptic side opening of a 2 mm coronary artery, both in one solve."
+        ),
+    )
+
+
+def stiff_patch_sample(
+    *, stiff: float = 10.0, resolution: float = 1.0, length: str = "shorter"
+) -> tuple[Sample, np.ndarray]:
+    """The partial-patch sample with one half of the patch ``stiff`` times stiffer.
+
+    Parameters
+    ----------
+    stiff : float
+        Stiffness of the stiff half relative to the soft half (1).
+    resolution : float
+    length : {"shorter", "equal", "longer"}
+
+    Returns
+    -------
+    sample : Sample
+    stiffness : ndarray, shape (m,)
+        Per guest face: ``stiff`` where the face centre lies on the patch's
+        +y side of its long axis (as placed), 1 elsewhere.
+    """
+    s = paper_sample("partial_patch", length, resolution=resolution)
+    V, F = s.guest.V, s.guest.F
+    centre = V.mean(axis=0)
+    # the patch's short axis as placed: the in-plane direction of least extent
+    _, _, Vt = np.linalg.svd(V - centre, full_matrices=False)
+    side = (V[F].mean(axis=1) - centre) @ Vt[1]
+    return s, np.where(side > 0.0, float(stiff), 1.0)
