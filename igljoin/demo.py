@@ -22,6 +22,7 @@ import numpy as np
 
 from . import phantoms
 from .atomic import atomic_write_text
+from .errors import MissingExtraError
 from .join import JoinSolver
 from .result import JoinResult
 
@@ -308,10 +309,12 @@ def run(
     atomic_write_text(paths["report"], json.dumps(report, indent=2))
     notes = []
     if figures:
+        from .viz.figures import paper_figures
+
         try:
-            from .viz.figures import paper_figures
-        except ImportError as exc:  # polyscope/pillow missing
+            written = paper_figures(runs, out)
+        except MissingExtraError as exc:  # polyscope or Pillow missing: raised on first use
             notes.append(f"figures skipped: {exc}")
         else:
-            paths.update(paper_figures(runs, out))
+            paths.update(written)
     return {"paths": paths, "claims": checks, "rows": rows, "notes": notes}

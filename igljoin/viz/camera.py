@@ -134,7 +134,15 @@ def seam_axes(result: Any) -> dict[str, np.ndarray]:
 
 
 def frame_camera(
-    result: Any, view: str, aspect: float, *, fov_deg: float = FOV_DEG, margin: float = MARGIN
+    result: Any,
+    view: str,
+    aspect: float,
+    *,
+    fov_deg: float = FOV_DEG,
+    margin: float = MARGIN,
+    include: np.ndarray | None = None,
+    context: float = HOST_CONTEXT,
+    tilt_deg: float | None = None,
 ) -> Camera:
     """Camera for one of :data:`VIEWS` that frames the deformed guest and the seam.
 
@@ -148,6 +156,17 @@ def frame_camera(
         Vertical field of view.
     margin : float
         Scale of the framed extent (> 1 leaves a border).
+    include : ndarray, shape (p, 3), optional
+        Further points to keep in the picture, e.g. the guest where it
+        started, so that one camera shows a join before and after.
+    context : float
+        Host vertices within this fraction of the guest's size of the seam
+        are kept in the picture too (0: only the seam itself).
+    tilt_deg : float, optional
+        Angle (degrees) by which the view direction is turned: for ``"side"``
+        towards the guest's side (default :data:`SIDE_ELEVATION_DEG`), for
+        ``"along"`` towards the side camera (default 0: the exact profile; on
+        a sheet-like host a tilt looks down onto the surface at a grazing angle).
 
     Returns
     -------
@@ -156,16 +175,20 @@ def frame_camera(
     axes = seam_axes(result)
     up = axes["up"]
     d = axes[view]
-    if view == "side":
-        e = np.radians(SIDE_ELEVATION_DEG)
-        d = _unit(np.cos(e) * d + np.sin(e) * up)
+    if tilt_deg is None:
+        tilt_deg = SIDE_ELEVATION_DEG if view == "side" else 0.0
+    towards = up if view == "side" else axes["side"]
+    if tilt_deg:
+        e = np.radians(float(tilt_deg))
+        d = _unit(np.cos(e) * d + np.sin(e) * towards)
     up = _perp(up, d)
     G = result.guest.V
     H = result.host.V
     P = H[result.host_curve]
     size = float(np.linalg.norm(np.ptp(G, axis=0)))
-    near = point_polyline_distance(H, P, result.closed) <= HOST_CONTEXT * size
-    Q = np.concatenate([G, H[near], P])
+    near = point_polyline_distance(H, P, result.closed) <= context * size
+    extra = np.empty((0, 3)) if include is None else np.asarray(include, dtype=np.float64)
+    Q = np.concatenate([G, extra.reshape(-1, 3), H[near], P])
     r = _unit(np.cross(-d, up))
     B = np.stack([r, up, d])
     local = (Q - axes["centre"]) @ B.T

@@ -28,7 +28,7 @@ from .camera import Camera, frame_camera
 from .overlay import MIN_SIZE, compose, figures_line, layout
 from .scene import Scene, hidden_scenes
 
-__all__ = ["Panel", "Picture", "picture", "render"]
+__all__ = ["Panel", "Picture", "picture", "render", "render_meshes"]
 
 #: Accepted ``view`` values and the views each one renders.
 VIEW_SETS = {"side": ("side",), "along": ("along",), "both": ("side", "along")}
@@ -125,10 +125,13 @@ def _rendered_background(ps: Any) -> tuple[int, int, int]:
 
 
 @contextmanager
-def _stage(ps: Any, result: Any, limit: float) -> Iterator[tuple[Scene, tuple]]:
-    """Show only a fresh scene of ``result``; restore the viewer's state afterwards.
+def _offscreen(ps: Any, lo: np.ndarray, hi: np.ndarray) -> Iterator[tuple]:
+    """Hide live scenes, fix background and scene extents; restore the viewer's state afterwards.
 
-    Yields the scene and the background colour as rendered (RGB bytes).
+    The scene extents (which set polyscope's clip planes and home view) are
+    the box ``lo``–``hi`` rather than whatever is registered, so that a
+    picture depends only on its own content. Yields the background colour as
+    rendered (RGB bytes).
     """
     saved_view = ps.get_view_as_json()
     saved_size = ps.get_window_size()
@@ -138,21 +141,33 @@ def _stage(ps: Any, result: Any, limit: float) -> Iterator[tuple[Scene, tuple]]:
         ps.set_background_color(colors.polyscope_background(colors.BACKGROUND))
         ps.set_ground_plane_mode("none")
         background = _rendered_background(ps)
-        scene = Scene(ps, result, prefix=_PREFIX, limit=limit, edges=False)
         try:
-            lo = np.minimum(result.guest.V.min(axis=0), result.host.V.min(axis=0))
-            hi = np.maximum(result.guest.V.max(axis=0), result.host.V.max(axis=0))
             ps.set_automatically_compute_scene_extents(False)
             ps.set_bounding_box(lo, hi)
             ps.set_length_scale(float(np.linalg.norm(hi - lo)))
-            yield scene, background
+            yield background
         finally:
-            scene.remove()
             ps.set_automatically_compute_scene_extents(True)
             ps.set_background_color(saved_bg)
             ps.set_window_size(*saved_size)
             ps.set_view_from_json(saved_view)
             ps.set_vertical_fov_degrees(saved_fov)
+
+
+@contextmanager
+def _stage(ps: Any, result: Any, limit: float) -> Iterator[tuple[Scene, tuple]]:
+    """Show only a fresh scene of ``result``; restore the viewer's state afterwards.
+
+    Yields the scene and the background colour as rendered (RGB bytes).
+    """
+    lo = np.minimum(result.guest.V.min(axis=0), result.host.V.min(axis=0))
+    hi = np.maximum(result.guest.V.max(axis=0), result.host.V.max(axis=0))
+    with _offscreen(ps, lo, hi) as background:
+        scene = Scene(ps, result, prefix=_PREFIX, limit=limit, edges=False)
+        try:
+            yield scene, background
+        finally:
+            scene.remove()
 
 
 def _shoot(ps: Any, cam: Camera, w: int, h: int) -> tuple[np.ndarray, np.ndarray, float]:
@@ -171,6 +186,78 @@ def _shoot(ps: Any, cam: Camera, w: int, h: int) -> tuple[np.ndarray, np.ndarray
         np.asarray(ps.get_camera_view_matrix(), dtype=np.float64),
         float(ps.get_vertical_fov_degrees()),
     )
+
+
+def render_meshes(
+    host: Any,
+    guest: Any,
+    guest_colors: np.ndarray,
+    camera: Camera,
+    size: tuple[int, int],
+    *,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    host_color: tuple = colors.HOST_COLOR,
+) -> tuple[np.ndarray, tuple[int, int, int]]:
+    """Render a host and a guest with given face colours, off-screen, from a given camera.
+
+    The bare panel behind figures that show meshes which are not a join
+    result, such as the guest where it starts (the paper's "initial
+    configuration"), next to panels of joins seen through the same camera.
+
+    Parameters
+    ----------
+    host, guest : Mesh
+        Anything with ``V`` (n, 3) and ``F`` (m, 3).
+    guest_colors : ndarray, shape (m, 3)
+        RGB in [0, 1] per guest face (e.g. :func:`igljoin.viz.colors.area_colors`).
+    camera : Camera
+        E.g. from :func:`igljoin.viz.frame_camera`.
+    size : (int, int)
+        Width and height in pixels.
+    bounds : (ndarray, ndarray), optional
+        Scene box ``(lo, hi)``, shape (3,) each; it sets polyscope's clip
+        planes, so give panels that are compared the same box (default: the
+        box of host and guest).
+    host_color : tuple of float
+        RGB of the host.
+
+    Returns
+    -------
+    image : ndarray of uint8, shape (h, w, 3)
+    background : (int, int, int)
+        The background colour as rendered.
+    """
+    w, h = (int(v) for v in size)
+    guest_colors = np.asarray(guest_colors, dtype=np.float64)
+    if guest_colors.shape != (len(guest.F), 3):
+        raise OptionsError(
+            f"guest_colors must have shape ({len(guest.F)}, 3), one RGB per guest face; "
+            f"got {guest_colors.shape}"
+        )
+    if bounds is None:
+        lo = np.minimum(guest.V.min(axis=0), host.V.min(axis=0))
+        hi = np.maximum(guest.V.max(axis=0), host.V.max(axis=0))
+    else:
+        lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+    ps = ensure_init(headless=True)
+    with _offscreen(ps, lo, hi) as background:
+        structures = [
+            ps.register_surface_mesh(
+                f"{_PREFIX}panel host", host.V, host.F, color=host_color, smooth_shade=True
+            ),
+            ps.register_surface_mesh(
+                f"{_PREFIX}panel guest", guest.V, guest.F, smooth_shade=True, edge_width=0.0
+            ),
+        ]
+        try:
+            structures[1].add_color_quantity(
+                "colour", guest_colors, defined_on="faces", enabled=True
+            )
+            rgb, _, _ = _shoot(ps, camera, w, h)
+        finally:
+            for s in structures:
+                s.remove()
+    return rgb, background
 
 
 def default_title(result: Any) -> str:

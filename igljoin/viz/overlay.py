@@ -16,7 +16,7 @@ import numpy as np
 from . import colors
 from ._backend import pillow
 
-__all__ = ["Layout", "compose", "figures_line", "layout"]
+__all__ = ["Layout", "colour_bar", "compose", "figures_line", "fonts", "layout"]
 
 #: Minimum picture size (width, height) that leaves room for the title and the colour bar.
 MIN_SIZE = (320, 240)
@@ -62,7 +62,8 @@ def layout(size: tuple[int, int], n_panels: int) -> Layout:
     return Layout((w, h), fs, title_h, panels, (n_panels * pw, title_h, bar_w, ph))
 
 
-def _fonts(size: int) -> Any:
+def fonts(size: int) -> tuple[Any, Any]:
+    """Pillow's built-in font at ``size`` pixels and at 0.8 of it (the small font)."""
     ImageFont = pillow().ImageFont
     try:
         return ImageFont.load_default(size=size), ImageFont.load_default(size=round(size * 0.8))
@@ -111,11 +112,29 @@ def figures_line(result: Any) -> str:
     return "   \u00b7   ".join(parts)
 
 
-def _colour_bar(img: Any, lay: Layout, limit: float, data_range: tuple, font: Any, small: Any):
+def colour_bar(
+    img: Any, box: tuple[int, int, int, int], font_size: int, limit: float, data_range: tuple
+) -> None:
+    """Draw the area-ratio colour bar with its ticks into ``img`` (in place).
+
+    Parameters
+    ----------
+    img : PIL.Image.Image
+        RGB canvas.
+    box : (int, int, int, int)
+        ``x, y, width, height`` of the bar column (origin top-left).
+    font_size : int
+        Size of the bar's title; ticks use 0.8 of it.
+    limit : float
+        Area ratio at full red (``1 / limit`` at full blue).
+    data_range : (float, float)
+        Smallest and largest area ratio shown, marked beside the bar (``None`` skips a mark).
+    """
     PIL = pillow()
     draw = PIL.ImageDraw.Draw(img)
-    x, y, w, h = lay.bar
-    fs = lay.font_size
+    x, y, w, h = box
+    fs = font_size
+    font, small = fonts(fs)
     top = y + int(3.2 * fs)
     bottom = y + h - int(1.6 * fs)
     bx0 = x + int(0.9 * fs)
@@ -186,11 +205,11 @@ def compose(
     for (x, y, _, _), view in zip(lay.panels, views):
         img.paste(PIL.Image.fromarray(np.ascontiguousarray(view)), (x, y))
     draw = PIL.ImageDraw.Draw(img)
-    font, small = _fonts(lay.font_size)
+    font, small = fonts(lay.font_size)
     fs = lay.font_size
     draw.text((int(0.6 * fs), int(0.4 * fs)), title, fill=_TEXT, font=font)
     draw.text((int(0.6 * fs), int(0.4 * fs) + round(1.35 * fs)), subtitle, fill=_DIM, font=small)
     for (x, y, _, _), caption in zip(lay.panels, captions):
         draw.text((x + int(0.6 * fs), y + int(0.3 * fs)), caption, fill=_DIM, font=small)
-    _colour_bar(img, lay, limit, data_range, font, small)
+    colour_bar(img, lay.bar, lay.font_size, limit, data_range)
     return img

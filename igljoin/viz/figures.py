@@ -1,0 +1,384 @@
+"""The paper's Figs. 2 and 3 redrawn from the demo's joins (what ``make demo`` draws).
+
+One figure per scenario, laid out like the paper's: rows
+
+1. the initial configuration (host and the guest where the sample places it,
+   undeformed, so white),
+2. the join without the smooth-join term,
+3. the join with it, seen across the seam,
+4. the join with it, seen along the seam's long axis from just above the host
+   (:data:`ALONG_TILT_DEG`): the profile through the seam, where a crease is a kink,
+
+and columns (a) shorter, (b) equal, (c) longer guest boundary. Rows 1–3 of a
+column share one camera, framed on the initial and both joined guests, so a
+row compares like with like. Every guest is coloured by area change on one
+scale for the whole figure (blue shrink, white unchanged, red stretch,
+:func:`igljoin.viz.colors.area_colors`) with one colour bar; the host is drawn
+in :data:`igljoin.viz.colors.HOST_COLOR`, which is off that scale.
+
+Everything — cameras, scene extents, scale, text — follows from the input, so
+the same runs give the same PNG bytes.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..atomic import atomic_path
+from ..errors import OptionsError
+from . import colors
+from ._backend import ensure_init, pillow
+from .camera import frame_camera
+from .headless import render_meshes
+from .overlay import colour_bar, fonts
+
+__all__ = ["FIGURES", "FigureLayout", "figure_layout", "paper_figure", "paper_figures", "scale"]
+
+#: Output key, scenario and title of each figure.
+FIGURES = {
+    "figure_end_to_end": ("end_to_end", "End-to-end join, laid out like the paper's Fig. 2"),
+    "figure_partial_patch": ("partial_patch", "Partial patching, laid out like the paper's Fig. 3"),
+}
+#: Column order and the paper's column letters.
+LENGTHS = ("shorter", "equal", "longer")
+COLUMN_LETTERS = {"shorter": "a", "equal": "b", "longer": "c"}
+ROW_LABELS = (
+    "(1) initial configuration",
+    "(2) without smooth join",
+    "(3) with smooth join, across the seam",
+    "(4) with smooth join, along the seam",
+)
+#: Rendered panel size (width, height) in pixels: 3 x 4 panels and the bands make ~1530 x 1830.
+PANEL_SIZE = (440, 400)
+#: Candidate area ratios at full colour; the figure uses the smallest that holds
+#: :data:`SCALE_PERCENTILE` per cent of its deformed faces (the rest saturate; the colour bar
+#: marks the true extremes).
+NICE_LIMITS = (1.1, 1.25, 1.5, 2.0, 3.0, 4.0, 8.0)
+SCALE_PERCENTILE = 99.0
+#: Host context of the along-the-seam view (fraction of the guest's size around the seam): less
+#: than the side view's, so the profile through the seam fills the panel.
+ALONG_CONTEXT = 0.1
+#: Tilt of the along-the-seam view towards the side camera (degrees): a grazing view that
+#: shows the guest's colours and the profile through the seam at once.
+ALONG_TILT_DEG = 25.0
+
+_TEXT = (235, 235, 235)
+_DIM = (170, 172, 178)
+
+
+@dataclass(frozen=True)
+class FigureLayout:
+    """Where things go on a figure's canvas (pixels, origin top-left).
+
+    Attributes
+    ----------
+    size : (int, int)
+        Canvas width and height.
+    font_size : int
+    title_height : int
+        Title band (title and one explanatory line).
+    header_height : int
+        Band of column headers under the title.
+    caption_height : int
+        Strip above each panel with its key figures.
+    label_width : int
+        Column of (rotated) row labels on the left.
+    panel_size : (int, int)
+        Width and height of each 3D panel.
+    rows, columns : int
+    bar : (int, int, int, int)
+        ``x, y, width, height`` of the colour bar column on the right.
+    """
+
+    size: tuple[int, int]
+    font_size: int
+    title_height: int
+    header_height: int
+    caption_height: int
+    label_width: int
+    panel_size: tuple[int, int]
+    rows: int
+    columns: int
+    bar: tuple[int, int, int, int]
+
+    def panel(self, row: int, column: int) -> tuple[int, int, int, int]:
+        """``x, y, width, height`` of the 3D panel in ``row`` and ``column`` (both from 0).
+
+        Its caption strip is the :attr:`caption_height` pixels right above it.
+        """
+        if not (0 <= row < self.rows and 0 <= column < self.columns):
+            raise OptionsError(
+                f"panel ({row}, {column}) is outside the {self.rows} x {self.columns} grid"
+            )
+        w, h = self.panel_size
+        return (
+            self.label_width + column * w,
+            self.title_height
+            + self.header_height
+            + row * (h + self.caption_height)
+            + self.caption_height,
+            w,
+            h,
+        )
+
+
+def figure_layout(
+    columns: int = len(LENGTHS),
+    rows: int = len(ROW_LABELS),
+    panel_size: tuple[int, int] = PANEL_SIZE,
+) -> FigureLayout:
+    """The grid of a paper figure: title band, column headers, row labels, panels, colour bar.
+
+    Parameters
+    ----------
+    columns, rows : int
+        Grid size (the paper's figures are 3 columns by 4 rows).
+    panel_size : (int, int)
+        Width and height of one panel in pixels.
+
+    Returns
+    -------
+    FigureLayout
+
+    Examples
+    --------
+    >>> lay = figure_layout()
+    >>> lay.size, lay.panel(0, 0)
+    ((1530, 1826), (50, 148, 440, 400))
+    """
+    pw, ph = (int(v) for v in panel_size)
+    fs = 20
+    title_h = 3 * fs + fs // 2 + 12
+    header_h = 2 * fs
+    caption_h = 4 * fs // 3
+    label_w = 5 * fs // 2
+    bar_w = 8 * fs
+    width = label_w + columns * pw + bar_w
+    grid_h = rows * (ph + caption_h)
+    bar = (label_w + columns * pw, title_h + header_h, bar_w, grid_h)
+    return FigureLayout(
+        size=(width, title_h + header_h + grid_h),
+        font_size=fs,
+        title_height=title_h,
+        header_height=header_h,
+        caption_height=caption_h,
+        label_width=label_w,
+        panel_size=(pw, ph),
+        rows=rows,
+        columns=columns,
+        bar=bar,
+    )
+
+
+def scale(ratios: Sequence[np.ndarray]) -> float:
+    """The figure's area ratio at full colour: one of :data:`NICE_LIMITS`.
+
+    The smallest candidate at or above the :data:`SCALE_PERCENTILE` percentile
+    of ``max(r, 1 / r)`` over all faces, so that a figure whose guests hardly
+    change still shows colour and one whose guests change a lot does not
+    saturate.
+
+    Parameters
+    ----------
+    ratios : sequence of ndarray
+        Area ratios (deformed over rest) of every deformed guest in the figure.
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> scale([np.array([1.0, 1.3, 0.9])])
+    1.5
+    """
+    r = np.concatenate([np.asarray(a, dtype=np.float64).reshape(-1) for a in ratios])
+    r = r[np.isfinite(r) & (r > 0)]
+    if r.size == 0:
+        return colors.AREA_RATIO_LIMIT
+    change = float(np.percentile(np.exp2(np.abs(np.log2(r))), SCALE_PERCENTILE))
+    return next((v for v in NICE_LIMITS if v >= change), NICE_LIMITS[-1])
+
+
+def _white(mesh: Any) -> np.ndarray:
+    return np.ones((len(mesh.F), 3))
+
+
+def _bounds(*meshes: Any) -> tuple[np.ndarray, np.ndarray]:
+    V = np.concatenate([m.V for m in meshes])
+    return V.min(axis=0), V.max(axis=0)
+
+
+def _column_panels(run: Any, aspect: float, limit: float) -> list[tuple]:
+    """``(host, guest, face colours, camera)`` of the four rows of one sample's column."""
+    s, plain, smooth = run.sample, run.plain, run.smooth
+    side = frame_camera(smooth, "side", aspect, include=np.concatenate([s.guest.V, plain.guest.V]))
+    along = frame_camera(smooth, "along", aspect, context=ALONG_CONTEXT, tilt_deg=ALONG_TILT_DEG)
+    return [
+        (s.host, s.guest, _white(s.guest), side),
+        (plain.host, plain.guest, colors.area_colors(plain.area_ratio, limit), side),
+        (smooth.host, smooth.guest, colors.area_colors(smooth.area_ratio, limit), side),
+        (smooth.host, smooth.guest, colors.area_colors(smooth.area_ratio, limit), along),
+    ]
+
+
+def _captions(run: Any) -> list[str]:
+    # ASCII and the degree sign only: Pillow's built-in font has no en dash and no times sign
+    def joined(res: Any) -> str:
+        r = res.area_ratio
+        return (
+            f"mean crease {res.crease.mean():.2f}\u00b0, area ratio "
+            f"{np.nanmin(r):.2f} to {np.nanmax(r):.2f}"
+        )
+
+    return [
+        "where the sample places the guest, undeformed",
+        joined(run.plain),
+        joined(run.smooth),
+        f"mean crease {run.smooth.crease.mean():.2f}\u00b0, seen along the seam",
+    ]
+
+
+def _vertical_text(img: Any, text: str, box: tuple, font: Any, background: tuple) -> None:
+    """Write ``text`` rotated a quarter turn (reading upwards), centred in ``box``."""
+    PIL = pillow()
+    x, y, w, h = box
+    left, top, right, bottom = font.getbbox(text)
+    strip = PIL.Image.new("RGB", (right - left + 4, bottom - top + 4), background)
+    PIL.ImageDraw.Draw(strip).text((2 - left, 2 - top), text, fill=_TEXT, font=font)
+    strip = strip.transpose(PIL.Image.Transpose.ROTATE_90)
+    img.paste(strip, (x + (w - strip.width) // 2, y + (h - strip.height) // 2))
+
+
+def paper_figure(runs: Sequence[Any], title: str = "") -> Any:
+    """Draw one paper figure from the runs of one scenario.
+
+    Parameters
+    ----------
+    runs : sequence of igljoin.demo.SampleRun
+        One per column, left to right (the paper: shorter, equal, longer),
+        all of the same scenario.
+    title : str
+        Title line.
+
+    Returns
+    -------
+    PIL.Image.Image
+        RGB figure of size :func:`figure_layout` ``(len(runs)).size``.
+    """
+    if not runs:
+        raise OptionsError("paper_figure needs at least one SampleRun (one per column)")
+    PIL = pillow()
+    ensure_init(headless=True)
+    lay = figure_layout(columns=len(runs))
+    pw, ph = lay.panel_size
+    deformed = [res.area_ratio for r in runs for res in (r.plain, r.smooth)]
+    limit = scale(deformed)
+    data = np.concatenate(deformed)
+    shots, background = [], None
+    for col, run in enumerate(runs):
+        box = _bounds(run.sample.host, run.sample.guest, run.plain.guest, run.smooth.guest)
+        for row, (host, guest, face_colors, cam) in enumerate(_column_panels(run, pw / ph, limit)):
+            rgb, background = render_meshes(host, guest, face_colors, cam, (pw, ph), bounds=box)
+            shots.append((lay.panel(row, col), rgb))
+    img = PIL.Image.new("RGB", lay.size, background)
+    for (x, y, _, _), rgb in shots:
+        img.paste(PIL.Image.fromarray(rgb), (x, y))
+    draw = PIL.ImageDraw.Draw(img)
+    font, small = fonts(lay.font_size)
+    fs = lay.font_size
+    draw.text((fs // 2, fs // 3), title, fill=_TEXT, font=font)
+    draw.text(
+        (fs // 2, fs // 3 + round(1.4 * fs)),
+        "Guest coloured by area ratio (deformed / rest) on one scale for the whole figure: "
+        "blue shrink, white no change, red stretch. Host (rigid) in grey-green.",
+        fill=_DIM,
+        font=small,
+    )
+    draw.text(
+        (fs // 2, fs // 3 + round(2.5 * fs)),
+        f"Rows 1 to 3 of a column share one camera; row 4 looks along the seam's long axis, "
+        f"turned {ALONG_TILT_DEG:g}\u00b0 towards row 3's camera. "
+        "Crease: angle between host and guest across the seam.",
+        fill=_DIM,
+        font=small,
+    )
+    for col, run in enumerate(runs):
+        x, y, w, _ = lay.panel(0, col)
+        length = run.sample.length
+        header = (
+            f"({COLUMN_LETTERS.get(length, '?')}) {length}: guest boundary "
+            f"{run.sample.boundary_ratio:.2f} x the host's"
+        )
+        draw.text(
+            (x + w // 2, lay.title_height + lay.header_height // 2),
+            header,
+            fill=_TEXT,
+            font=font,
+            anchor="mm",
+        )
+        for row, caption in enumerate(_captions(run)):
+            px, py, _, _ = lay.panel(row, col)
+            mid = py - lay.caption_height // 2
+            draw.text((px + fs // 3, mid), caption, fill=_DIM, font=small, anchor="lm")
+    for row, label in enumerate(ROW_LABELS):
+        _, y, _, h = lay.panel(row, 0)
+        _vertical_text(img, label, (0, y, lay.label_width, h), small, background)
+    # thin separators between the cells (a cell is a caption strip and its panel)
+    grid = tuple(min(255, c + 40) for c in background)
+    top = lay.title_height + lay.header_height
+    for col in range(1, lay.columns):
+        x = lay.panel(0, col)[0]
+        draw.line([(x, top), (x, lay.size[1])], fill=grid)
+    for row in range(1, lay.rows):
+        y = lay.panel(row, 0)[1] - lay.caption_height
+        draw.line([(lay.label_width, y), (lay.bar[0], y)], fill=grid)
+    colour_bar(img, lay.bar, fs, limit, (float(np.nanmin(data)), float(np.nanmax(data))))
+    return img
+
+
+def paper_figures(runs: Sequence[Any], out_dir: str | os.PathLike) -> dict[str, Path]:
+    """Write the paper's Figs. 2 and 3 from the demo's runs as PNG files.
+
+    Parameters
+    ----------
+    runs : sequence of igljoin.demo.SampleRun
+        The demo's joins (:func:`igljoin.demo.run_samples`): each sample
+        without (``plain``) and with (``smooth``) the smooth-join term.
+    out_dir : str or os.PathLike
+        Existing folder for ``figure_end_to_end.png`` and
+        ``figure_partial_patch.png`` (each written atomically).
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+        ``"figure_end_to_end"`` and ``"figure_partial_patch"`` (a scenario
+        without runs gets no figure).
+
+    Examples
+    --------
+    >>> from igljoin import demo
+    >>> runs = demo.run_samples(resolution=0.4, progress=False)  # doctest: +SKIP
+    >>> paper_figures(runs, "out")  # doctest: +SKIP
+    {'figure_end_to_end': PosixPath('out/figure_end_to_end.png'), ...}
+    """
+    out = Path(out_dir)
+    written = {}
+    for key, (scenario, title) in FIGURES.items():
+        by_length = {r.sample.length: r for r in runs if r.sample.scenario == scenario}
+        columns = [by_length[k] for k in LENGTHS if k in by_length]
+        columns += [r for k, r in sorted(by_length.items()) if k not in LENGTHS]
+        if not columns:
+            continue
+        image = paper_figure(columns, title)
+        target = out / f"{key}.png"
+        with atomic_path(target) as tmp:
+            image.save(tmp, format="PNG")
+        written[key] = target
+    return written

@@ -1,0 +1,243 @@
+"""The paper's experiments end to end: ``igljoin.demo.run`` and ``igljoin demo`` (issue: demo).
+
+The demo is run once for the module at a reduced size (resolution 0.4: the six
+joins take ~2 s instead of ~10 s) and its outputs are checked as a user would
+see them: every file is there, the tables parse, the paper's claims are
+checked, and the two figures are pictures of the right things. The console
+script is run once at the paper's sizes, as ``make demo`` runs it.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from igljoin import demo
+
+pytest.importorskip("polyscope")
+pytest.importorskip("PIL")
+from PIL import Image  # noqa: E402
+
+from igljoin.viz.figures import FIGURES, figure_layout, paper_figures  # noqa: E402
+
+#: Reduced phantom size for the module's demo run (1 = the paper's sizes).
+RESOLUTION = 0.4
+SCENARIOS = ("end_to_end", "partial_patch")
+LENGTHS = ("shorter", "equal", "longer")
+VARIANTS = ("with_smooth_join", "without_smooth_join")
+RESULT_FILES = ("guest.ply", "merged.ply", "report.json")
+IGLJOIN = Path(sys.executable).parent / "igljoin"
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory) -> tuple[Path, dict]:
+    out = tmp_path_factory.mktemp("demo")
+    return out, demo.run(out, resolution=RESOLUTION, progress=False)
+
+
+def _rgb(path: Path) -> np.ndarray:
+    with Image.open(path) as im:
+        return np.asarray(im.convert("RGB")).astype(np.int64)
+
+
+def _masks(a: np.ndarray) -> dict[str, np.ndarray]:
+    """Pixels that are clearly red, clearly blue, or light grey (a white surface, shaded).
+
+    The margins (50 and 30 levels of 255) are far above what shading does to
+    a grey surface or to the grey-green host (R - B < 15, G > R), so only the
+    guest's area colours and the colour bar pass the red and blue tests.
+    """
+    R, G, B = a[..., 0], a[..., 1], a[..., 2]
+    return {
+        "red": (R - B > 50) & (R - G > 30),
+        "blue": B - R > 50,
+        "grey": (np.abs(R - G) < 12) & (np.abs(G - B) < 12) & (R > 150),
+    }
+
+
+def _in_panel(mask: np.ndarray, box: tuple[int, int, int, int]) -> int:
+    x, y, w, h = box
+    return int(mask[y : y + h, x : x + w].sum())
+
+
+# --------------------------------------------------------------------------- files
+
+
+def test_writes_every_file(run):
+    out, result = run
+    paths = result["paths"]
+    assert result["notes"] == []  # the viz extra is installed here: no figure was skipped
+    for key in ("table_md", "table_csv", "report", *FIGURES):
+        assert Path(paths[key]).is_file(), key
+        assert Path(paths[key]).stat().st_size > 0, key
+    assert paths["figure_end_to_end"] == out / "figure_end_to_end.png"
+    assert paths["figure_partial_patch"] == out / "figure_partial_patch.png"
+    for scenario in SCENARIOS:
+        for length in LENGTHS:
+            for variant in VARIANTS:
+                folder = out / scenario / length / variant
+                for name in RESULT_FILES:
+                    path = folder / name
+                    assert path.is_file() and path.stat().st_size > 0, path
+                report = json.loads((folder / "report.json").read_text(encoding="utf-8"))
+                assert isinstance(report, dict) and report
+    # atomic writers leave no hidden temporary files behind
+    assert not [p for p in out.rglob(".*")]
+
+
+def test_table_csv_has_one_row_per_sample(run):
+    out, _ = run
+    with open(out / "table.csv", newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 6
+    assert {(r["scenario"], r["length"]) for r in rows} == {
+        (s, n) for s in SCENARIOS for n in LENGTHS
+    }
+    for r in rows:
+        numbers = {k: float(v) for k, v in r.items() if k not in ("scenario", "length")}
+        assert all(np.isfinite(v) for v in numbers.values()), r
+        # a closed seam: gap at rounding level (1e-9 seam edges is a million times above it)
+        assert numbers["seam_gap_rel"] < 1e-9, r
+
+
+def test_report_json_matches_the_tables(run):
+    out, result = run
+    report = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    assert report["resolution"] == RESOLUTION
+    assert len(report["rows"]) == 6 and len(report["samples"]) == 6
+    assert [c["claim"] for c in report["claims"]] == [c["claim"] for c in result["claims"]]
+    assert len(report["claims"]) == 4
+
+
+def test_claims_hold_at_reduced_size(run):
+    """The smoothness, stretch and minimal-deformation claims hold at resolution 0.4."""
+    out, _ = run
+    claims = json.loads((out / "report.json").read_text(encoding="utf-8"))["claims"]
+    for c in claims[:3]:
+        assert c["confirmed"], c
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "at resolution < 0.8 the longer partial patch shrinks below the claim's 0.9 total area "
+        "ratio (0.83 at 0.4, 0.90 at 0.8, 0.92 at 1; the same with the committed solver); "
+        "confirmed at the paper's sizes, see test_cli_demo_at_paper_sizes"
+    ),
+)
+def test_all_claims_confirmed_at_reduced_size(run):
+    out, _ = run
+    claims = json.loads((out / "report.json").read_text(encoding="utf-8"))["claims"]
+    table = (out / "table.md").read_text(encoding="utf-8")
+    assert all(c["confirmed"] for c in claims), [c["evidence"] for c in claims]
+    assert "NOT confirmed" not in table
+    assert table.count("confirmed") == 4
+
+
+# --------------------------------------------------------------------------- figures
+
+
+@pytest.mark.parametrize("key", list(FIGURES))
+def test_figure_is_the_paper_layout_and_not_blank(run, key):
+    out, _ = run
+    a = _rgb(out / f"{key}.png")
+    lay = figure_layout()
+    assert a.shape == (lay.size[1], lay.size[0], 3)
+    # a rendered figure has shading gradients in every panel: thousands of colours (measured
+    # 13,000 to 25,000); a blank or flat-coloured canvas has a few dozen (text anti-aliasing)
+    assert len(np.unique(a[..., 0] * 65536 + a[..., 1] * 256 + a[..., 2])) > 5000
+    m = _masks(a)
+    for col in range(3):
+        # row 1 is the undeformed guest, white on the colour scale: drawn (a grey surface of at
+        # least 1,000 pixels; measured 9,000 to 67,000) and free of red and blue
+        assert _in_panel(m["grey"], lay.panel(0, col)) > 1000, (key, col)
+        assert _in_panel(m["red"], lay.panel(0, col)) == 0, (key, col)
+        assert _in_panel(m["blue"], lay.panel(0, col)) == 0, (key, col)
+    for row in (1, 2, 3):
+        # rows 2-4 show the joined guests: the shorter guest is stretched near the seam (the
+        # smallest red area, the seam band of the end-to-end join, measured 190 to 3,000
+        # pixels; 100 is well above anything but the area colours)
+        red = sum(_in_panel(m["red"], lay.panel(row, col)) for col in range(3))
+        assert red >= 100, (key, row, red)
+    # the longer guest shrinks at the seam: blue in its column (rows 2-4 together measured 700
+    # to 5,000 pixels)
+    blue = sum(_in_panel(m["blue"], lay.panel(row, 2)) for row in (1, 2, 3))
+    assert blue >= 200, (key, blue)
+    # the colour bar carries both ends of the scale
+    assert _in_panel(m["red"], lay.bar) > 1000 and _in_panel(m["blue"], lay.bar) > 1000
+
+
+def test_figures_are_deterministic(run, tmp_path):
+    """Joining again and drawing again gives the same bytes (no timings, no state carried)."""
+    out, _ = run
+    again = paper_figures(demo.run_samples(RESOLUTION, progress=False), tmp_path)
+    assert set(again) == set(FIGURES)
+    for key, path in again.items():
+        assert path.read_bytes() == (out / f"{key}.png").read_bytes(), key
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def _cli_demo_available() -> str | None:
+    """Why ``igljoin demo`` cannot be run, or None."""
+    if not IGLJOIN.exists():
+        return f"no console script at {IGLJOIN} (pip install -e .)"
+    proc = subprocess.run(
+        [str(IGLJOIN), "demo", "--help"], capture_output=True, text=True, timeout=120
+    )
+    if proc.returncode != 0:
+        return f"`igljoin demo` is not available yet: {proc.stderr.strip()[-200:]}"
+    return None
+
+
+@pytest.mark.slow
+def test_cli_demo_at_paper_sizes(tmp_path):
+    """``igljoin demo --out DIR`` as ``make demo`` runs it: everything written, claims confirmed."""
+    why = _cli_demo_available()
+    if why:
+        pytest.skip(why)
+    out = tmp_path / "demo"
+    proc = subprocess.run(
+        [str(IGLJOIN), "demo", "--out", str(out)], capture_output=True, text=True, timeout=600
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    report = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    assert report["resolution"] == 1.0
+    assert all(c["confirmed"] for c in report["claims"]), [c["evidence"] for c in report["claims"]]
+    table = (out / "table.md").read_text(encoding="utf-8")
+    assert table.count("confirmed") == 4 and "NOT confirmed" not in table
+    lay = figure_layout()
+    for key in FIGURES:
+        a = _rgb(out / f"{key}.png")
+        assert a.shape == (lay.size[1], lay.size[0], 3)
+        assert len(np.unique(a[..., 0] * 65536 + a[..., 1] * 256 + a[..., 2])) > 5000
+    for scenario in SCENARIOS:
+        for length in LENGTHS:
+            for variant in VARIANTS:
+                for name in RESULT_FILES:
+                    assert (out / scenario / length / variant / name).is_file()
+
+
+def test_render_meshes_names_the_colour_shape():
+    """The bare-panel hook behind row 1 rejects colours that are not one RGB per guest face."""
+    from igljoin import phantoms
+    from igljoin.errors import OptionsError
+    from igljoin.viz import Camera, render_meshes
+
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.3)
+    cam = Camera(np.array([40.0, 0.0, 0.0]), np.zeros(3), np.array([0.0, 0.0, 1.0]))
+    with pytest.raises(
+        OptionsError, match=rf"guest_colors must have shape \({len(s.guest.F)}, 3\)"
+    ):
+        render_meshes(s.host, s.guest, np.ones((3, 3)), cam, (64, 64))
+    rgb, background = render_meshes(s.host, s.guest, np.ones((len(s.guest.F), 3)), cam, (64, 48))
+    assert rgb.shape == (48, 64, 3) and rgb.dtype == np.uint8
+    assert len(background) == 3
