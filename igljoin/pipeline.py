@@ -54,7 +54,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from .atomic import atomic_write_text
+from .atomic import atomic_write_text, fsync_dir
 from .boundary import Curve, select_curve
 from .errors import IgljoinError, OptionsError, SpecError, WeldError, missing_extra
 from .io import read_mesh
@@ -333,19 +333,6 @@ def _temp_dir(final: Path, kind: str = "tmp") -> Path:
     raise FileExistsError(f"cannot create a temporary folder beside {final}")
 
 
-def _fsync_dir(path: Path) -> None:
-    try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
 def _publish(tmp: Path, final: Path) -> None:
     """Move the complete folder ``tmp`` to ``final``, replacing an old one safely."""
     for f in tmp.iterdir():
@@ -360,7 +347,7 @@ def _publish(tmp: Path, final: Path) -> None:
         old = final.with_name(f".{final.name}.old-{secrets.token_hex(4)}")
         os.replace(final, old)
     os.replace(tmp, final)
-    _fsync_dir(final.parent)
+    fsync_dir(final.parent)
     if old is not None:
         if old.is_dir() and not old.is_symlink():
             shutil.rmtree(old, ignore_errors=True)

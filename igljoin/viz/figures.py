@@ -36,7 +36,7 @@ from . import colors
 from ._backend import ensure_init, pillow
 from .camera import frame_camera
 from .headless import render_meshes
-from .overlay import colour_bar, fonts
+from .overlay import _DIM, _TEXT, colour_bar, fonts
 
 __all__ = ["FIGURES", "FigureLayout", "figure_layout", "paper_figure", "paper_figures", "scale"]
 
@@ -68,8 +68,6 @@ ALONG_CONTEXT = 0.1
 #: shows the guest's colours and the profile through the seam at once.
 ALONG_TILT_DEG = 25.0
 
-_TEXT = (235, 235, 235)
-_DIM = (170, 172, 178)
 
 
 @dataclass(frozen=True)

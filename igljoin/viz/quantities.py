@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..frames import seam_frames
-from ..metrics import edge_strain
+from ..metrics import edge_strain, vertex_strain
 from ..terms import LocalState, unique_edges
 
 __all__ = [
@@ -47,11 +47,7 @@ def vertex_edge_strain(V0: np.ndarray, V1: np.ndarray, F: np.ndarray) -> np.ndar
         ``(ℓ′ − ℓ)/ℓ`` averaged over incident edges: > 0 stretched, < 0 shrunk.
     """
     E = unique_edges(F)
-    s = np.nan_to_num(edge_strain(V0, V1, E))
-    n = len(V0)
-    total = np.bincount(E.reshape(-1), weights=np.repeat(s, 2), minlength=n)
-    count = np.bincount(E.reshape(-1), minlength=n)
-    return total / np.maximum(count, 1)
+    return np.nan_to_num(vertex_strain(E, edge_strain(V0, V1, E), len(V0)))
 
 
 def vertex_displacement(V0: np.ndarray, V1: np.ndarray) -> np.ndarray:
