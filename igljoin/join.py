@@ -41,6 +41,7 @@ _STRUCTURAL = {
     "stiffness",
     "stiffness_on",
     "snap_tolerance",
+    "linear_solver",
 }
 
 
@@ -127,6 +128,7 @@ class JoinSolver:
             self.host.V, hc, self.guest.V, gc, guest_start_given=start_given
         )
         self.factorizations = 0
+        self.last_run = None  # IterationResult of the latest solve (iteration statistics)
         self.timings: dict[str, float] = {"select": time.perf_counter() - t0}
         self._prepare()
 
@@ -155,7 +157,9 @@ class JoinSolver:
         )
         terms = []
         if opt.shape_weight > 0:
-            terms.append(ShapeTerm(c.V, c.F, opt.shape_weight, opt.laplacian, opt.rotation_aware))
+            terms.append(
+                ShapeTerm(c.V, c.F, opt.shape_weight, opt.laplacian, opt.rotation_aware, E=self.E)
+            )
         if opt.stretch_weight > 0:
             k = edge_stiffness(self.E, c.F, *self._stiffness())
             terms.append(StretchTerm(c.V, self.E, opt.stretch_weight * k))
@@ -186,7 +190,7 @@ class JoinSolver:
             )
         self.terms = terms
         t2 = time.perf_counter()
-        self.solver = LocalGlobalSolver(terms, len(c.V), c.seam)
+        self.solver = LocalGlobalSolver(terms, len(c.V), c.seam, opt.linear_solver)
         self.factorizations += 1
         self.timings.update(correspond=t1 - t0, terms=t2 - t1, factor=self.solver.factor_seconds)
 
@@ -338,6 +342,7 @@ class JoinSolver:
             acceleration=opt.acceleration,
         )
         t2 = time.perf_counter()
+        self.last_run = run
         result = self._result(run, bc)
         t3 = time.perf_counter()
         timings = dict(self.timings)

@@ -1,16 +1,27 @@
 """Local/global iteration around one prefactored constrained quadratic solve (§4.5).
 
-The energy ``Σ_terms Σ_r w_r ‖(K X)_r − target_r(X)‖²`` with the seam
+The energy ``E(X) = Σ_terms Σ_r w_r ‖(K X)_r − target_r(X)‖²`` with the seam
 vertices fixed is minimised by alternating
 
 * a local step: every term recomputes its target from the current ``X``
   (rotations, edge directions, half-plane projections), and
 * a global step: with targets fixed the energy is quadratic; its minimiser
   under the hard constraints ``X[b] = bc`` is one back-substitution with
-  libigl's ``min_quad_with_fixed``, factored once for ``Q = Σ Kᵀ W K``.
+  the factorization of ``Q = Σ Kᵀ W K`` (:mod:`igljoin.linsolve`), made once.
 
 This is the Gauss–Newton-like scheme the paper refers to; each step cannot
-increase the energy of the fixed-target problem.
+increase the energy.
+
+Every target is the closest point of ``K X`` in a fixed set (rotated rest
+coordinates, spheres of rest length, a half-plane or wedge), so ``E`` is a
+sum of squared distances to fixed sets and its gradient is
+``∇E = 2 (Q X − Σ Kᵀ W target(X))``: the global step is a gradient step
+preconditioned by ``Q``. The accelerated iteration uses exactly that: a
+limited-memory BFGS method whose initial inverse Hessian is the factored
+``Q⁻¹`` — so its first step *is* the local/global step — with a backtracking
+line search that only accepts steps that decrease the energy (Liu, Bouaziz
+and Kavan, "Quasi-Newton methods for real-time simulation of hyperelastic
+materials", ACM TOG 2017).
 """
 
 from __future__ import annotations
@@ -18,17 +29,26 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-import igl
 import numpy as np
 import scipy.sparse as sp
 
 from .errors import SolveError
+from .linsolve import FixedQuadratic
 from .terms import LocalState, Term
 
 __all__ = ["LocalGlobalSolver", "IterationResult"]
 
 # iterations over which the relative energy change is measured for convergence
 _WINDOW = 5
+
+# Armijo sufficient-decrease constant of the line search (any value <= 1/2 accepts
+# the plain local/global step, which always decreases the energy by at least
+# its model's prediction)
+_ARMIJO = 1e-4
+
+# line-search halvings before the quasi-Newton memory is dropped and the plain
+# step taken instead
+_MAX_BACKTRACKS = 6
 
 
 @dataclass
@@ -46,7 +66,13 @@ class IterationResult:
     reason : str
         ``"tolerance"``, ``"max_iterations"`` or ``"time_limit"``.
     timings : dict
-        Seconds spent in ``local`` and ``solve`` steps.
+        Seconds spent in ``local`` steps (targets, rotations, energy,
+        right-hand sides) and ``solve`` steps (back-substitutions).
+    stats : dict
+        ``local_steps`` (local steps evaluated, including rejected line-search
+        trials), ``back_solves``, ``rejected`` (line-search trials that did not
+        decrease the energy enough) and ``restarts`` (quasi-Newton memory
+        dropped).
     """
 
     X: np.ndarray
@@ -55,6 +81,7 @@ class IterationResult:
     converged: bool = False
     reason: str = ""
     timings: dict = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
 
 
 class LocalGlobalSolver:
@@ -67,44 +94,69 @@ class LocalGlobalSolver:
         Number of vertices.
     fixed : ndarray of int64, shape (b,)
         Vertices held at prescribed positions.
+    linear_solver : {"auto", "igl", "cholespy"}
+        Backend of the factorization (see :mod:`igljoin.linsolve`).
+
+    Attributes
+    ----------
+    Q : scipy.sparse.csr_matrix, shape (n, n)
+        ``Σ Kᵀ W K``.
+    backend : str
+        The linear solver used.
+    factor_seconds : float
+        Time to assemble and factor ``Q``.
     """
 
-    def __init__(self, terms: list[Term], n: int, fixed: np.ndarray):
+    def __init__(self, terms: list[Term], n: int, fixed: np.ndarray, linear_solver: str = "auto"):
         t0 = time.perf_counter()
         self.terms = terms
         self.n = n
         self.fixed = np.asarray(fixed, dtype=np.int64)
-        free = np.ones(n, dtype=bool)
-        free[self.fixed] = False
-        self.free = np.flatnonzero(free)
         Q = sp.csr_matrix((n, n))
         for term in terms:
-            Q = Q + term.K.T @ sp.diags(term.weights) @ term.K
-        self.Q = sp.csc_matrix(Q)
-        self.KtW = [sp.csr_matrix(term.K.T @ sp.diags(term.weights)) for term in terms]
-        self.data = igl.min_quad_with_fixed_data()
-        if self.free.size:
-            ok = igl.min_quad_with_fixed_precompute(
-                self.Q, self.fixed, sp.csc_matrix((0, n)), True, self.data
-            )
-            if ok is False:
-                raise SolveError(
-                    "the deformation system could not be factored (a part of the guest is not "
-                    "held by any term); check that every guest component touches the seam"
-                )
+            Q = Q + term.quadratic()
+        self.Q = sp.csr_matrix(Q)
+        self.factor = FixedQuadratic(self.Q, self.fixed, linear_solver)
+        self.backend = self.factor.backend
+        self.free = self.factor.free
         self.factor_seconds = time.perf_counter() - t0
 
+    # -- building blocks ----------------------------------------------------------------
+
+    def local(self, X: np.ndarray, hint: np.ndarray | None = None):
+        """Local step at ``X`` (n, 3): ``(state, energy, G)``.
+
+        ``G = Σ Kᵀ W (K X − target(X))`` (n, 3) is half the gradient of the
+        energy. ``hint`` (3, 3, n) are rotations of a nearby iterate to start
+        the rotation fit from.
+        """
+        state = LocalState(X, hint=hint)
+        e = 0.0
+        rhs = np.zeros((self.n, 3))
+        for term in self.terms:
+            et, gt = term.local(state)
+            e += et
+            rhs += gt
+        if not np.isfinite(e):
+            raise SolveError(
+                "the solve produced non-finite positions; the guest has degenerate or "
+                "collapsed faces — repair it with igljoin.clean and retry"
+            )
+        return state, e, rhs
+
     def global_step(self, targets: list[np.ndarray], bc: np.ndarray) -> np.ndarray:
-        """Minimiser of the fixed-target energy with ``X[fixed] = bc`` (shape (b, 3))."""
+        """Minimiser of the fixed-target energy with ``X[fixed] = bc`` (shape (b, 3)).
+
+        ``targets`` holds one array of shape (rows, 3) per term. Returns shape (n, 3).
+        """
         B = np.zeros((self.n, 3))
-        for KtW, t in zip(self.KtW, targets):
-            B -= KtW @ t
-        if not self.free.size:
-            X = np.zeros((self.n, 3))
-            X[self.fixed] = bc
-            return X
-        X = igl.min_quad_with_fixed_solve(self.data, B, bc, np.zeros((0, 3)))
-        return np.asarray(X)
+        for term, t in zip(self.terms, targets):
+            B += term.K.T @ (term.weights[:, None] * t)
+        return self.factor.solve(B, bc)
+
+    def energy(self, X: np.ndarray) -> float:
+        """``E(X)`` for positions of shape (n, 3)."""
+        return self.local(X)[1]
 
     def extend(self, displacement: np.ndarray) -> np.ndarray:
         """Smooth extension of a displacement of the fixed vertices to all vertices.
@@ -112,24 +164,14 @@ class LocalGlobalSolver:
         Solves ``Q u = 0`` on the free vertices with ``u[fixed] = displacement``
         (shape (b, 3)); reuses the factorization. Returns shape (n, 3).
         """
-        if not self.free.size:
-            U = np.zeros((self.n, 3))
-            U[self.fixed] = displacement
-            return U
-        return np.asarray(
-            igl.min_quad_with_fixed_solve(
-                self.data, np.zeros((self.n, 3)), displacement, np.zeros((0, 3))
-            )
-        )
+        return self.factor.solve(np.zeros((self.n, 3)), displacement)
 
     def bump(self) -> np.ndarray:
         """Response to a unit load with the fixed vertices at zero: ``Q φ = 1``, shape (n,)."""
-        if not self.free.size:
-            return np.zeros(self.n)
-        out = igl.min_quad_with_fixed_solve(
-            self.data, -np.ones((self.n, 1)), np.zeros((len(self.fixed), 1)), np.zeros((0, 1))
-        )
-        return np.asarray(out)[:, 0]
+        out = self.factor.solve(np.ones((self.n, 1)), np.zeros((len(self.fixed), 1)))
+        return out[:, 0]
+
+    # -- the iteration ------------------------------------------------------------------
 
     def run(
         self,
@@ -144,12 +186,14 @@ class LocalGlobalSolver:
     ) -> IterationResult:
         """Iterate from ``X0`` (shape (n, 3)) until the iterates settle.
 
-        One iteration is a local step (targets) followed by a global step
-        (back-substitution): the map ``G``. With ``acceleration > 0`` the
-        fixed-point iteration ``X ← G(X)`` is Anderson-accelerated over the
-        last ``acceleration`` iterates; an accelerated iterate that raises the
-        energy is rejected in favour of the plain step (and the history is
-        restarted), so the energy decreases as in the plain iteration.
+        With ``acceleration == 0`` every iteration is one local step
+        (targets) and one global step (back-substitution). With
+        ``acceleration = m > 0`` the global step is replaced by a limited-
+        memory BFGS step over the last ``m`` iterates (initial inverse
+        Hessian: the factored ``Q``), accepted only if it lowers the energy
+        enough (Armijo); otherwise the step is shortened and, after a few
+        failures, the plain local/global step is taken. Either way the
+        energy decreases at every iteration.
 
         Parameters
         ----------
@@ -159,16 +203,16 @@ class LocalGlobalSolver:
             Positions of the fixed vertices.
         max_iterations : int
         tolerance : float
-            Converged when the energy changed by less than ``tolerance`` times
-            its value over the last few iterations and no vertex moves more
-            than ``100 × tolerance × scale`` under one more iteration.
+            Converged when the energy fell by less than ``tolerance`` times
+            its value over the last five iterations and the last iteration
+            moved no vertex by more than ``sqrt(tolerance) × scale``.
         time_limit : float, optional
             Wall-clock seconds after which the current iterate is returned
             (``converged=False``, ``reason="time_limit"``).
         scale : float
             Length scale of the step criterion (e.g. the mean edge length).
         acceleration : int
-            Anderson history length; 0 for the plain local/global iteration.
+            Quasi-Newton history length; 0 for the plain local/global iteration.
 
         Returns
         -------
@@ -176,67 +220,94 @@ class LocalGlobalSolver:
         """
         start = time.perf_counter()
         clock = {"local": 0.0, "solve": 0.0}
-        free = self.free
+        stats = {"local_steps": 0, "back_solves": 0, "rejected": 0, "restarts": 0}
+        free, fixed = self.free, self.fixed
+        bc = np.asarray(bc, dtype=np.float64)
 
-        def local(Y):
+        def local(x, hint):
             t0 = time.perf_counter()
-            state = LocalState(Y)
-            targets = [term.target(state) for term in self.terms]
-            e = self._energy(state, targets)
+            X = np.empty((self.n, 3))
+            X[free] = x
+            X[fixed] = bc
+            state, e, G = self.local(X, hint)
             clock["local"] += time.perf_counter() - t0
-            if not np.isfinite(e):
-                raise SolveError(
-                    "the solve produced non-finite positions; the guest has degenerate or "
-                    "collapsed faces — repair it with igljoin.clean and retry"
-                )
-            return targets, e
+            stats["local_steps"] += 1
+            return state, e, G[free]
 
-        def global_(targets):
+        def back_solve(v):
             t0 = time.perf_counter()
-            Z = self.global_step(targets, bc)
+            out = self.factor.solve_free(v)
             clock["solve"] += time.perf_counter() - t0
-            return Z
+            stats["back_solves"] += 1
+            return out
 
         X = np.array(X0, dtype=np.float64)
-        X[self.fixed] = bc
-        targets, e = local(X)
+        X[fixed] = bc
+        result = IterationResult(X=X)
+        if not free.size:
+            result.energy = [self.local(X)[1]]
+            result.converged, result.reason = True, "tolerance"
+            result.timings, result.stats = clock, stats
+            return result
+
+        x = np.ascontiguousarray(X[free])
+        # g: half the gradient of E on the free rows
+        state, e, g = local(x, None)
         energy = [e]
-        g = global_(targets)
-        r = (g - X)[free].ravel()
-        dR: list[np.ndarray] = []
-        dG: list[np.ndarray] = []
-        result = IterationResult(X=g)
+        S: list[np.ndarray] = []
+        Y: list[np.ndarray] = []
+        rho: list[float] = []
+        step_tol = np.sqrt(tolerance) * scale
         for it in range(1, max_iterations + 1):
-            cand = g
-            if dR:
-                gamma = np.linalg.lstsq(np.stack(dR, axis=1), r, rcond=None)[0]
-                cand = g.copy()
-                cand[free] = (g[free].ravel() - np.stack(dG, axis=1) @ gamma).reshape(-1, 3)
-            targets, e_new = local(cand)
-            if cand is not g and e_new > energy[-1]:
-                # the accelerated iterate raised the energy: take the plain step instead
-                dR.clear()
-                dG.clear()
-                cand = g
-                targets, e_new = local(cand)
-            g_new = global_(targets)
-            r_new = (g_new - cand)[free].ravel()
+            hint = state.rotations_soa()
+            if acceleration > 0 and S:
+                d = -self._two_loop(g, S, Y, rho, back_solve)
+                gd = float(np.vdot(g, d))
+                if not gd < 0.0:
+                    S.clear(), Y.clear(), rho.clear()
+                    stats["restarts"] += 1
+                    d = -back_solve(g)
+                    gd = float(np.vdot(g, d))
+            else:
+                # the plain global step
+                d = -back_solve(g)
+                gd = float(np.vdot(g, d))
+            t = 1.0
+            for _ in range(_MAX_BACKTRACKS + 1):
+                x_new = x + t * d
+                state_new, e_new, g_new = local(x_new, hint)
+                # Armijo on E with directional derivative 2 gᵀd
+                if e_new <= e + _ARMIJO * t * 2.0 * gd or acceleration == 0:
+                    break
+                stats["rejected"] += 1
+                # backtrack with the minimiser of the quadratic through e, slope and e_new
+                denom = e_new - e - 2.0 * gd * t
+                t_q = -gd * t * t / denom if denom > 0 else 0.5 * t
+                t = float(np.clip(t_q, 0.1 * t, 0.5 * t))
+            else:
+                # no acceptable step along d: drop the memory, take the plain step
+                S.clear(), Y.clear(), rho.clear()
+                stats["restarts"] += 1
+                t = 1.0
+                d = -back_solve(g)
+                x_new = x + d
+                state_new, e_new, g_new = local(x_new, hint)
             if acceleration > 0:
-                dR.append(r_new - r)
-                dG.append((g_new - g)[free].ravel())
-                if len(dR) > acceleration:
-                    dR.pop(0)
-                    dG.pop(0)
-            energy.append(e_new)
-            g, r = g_new, r_new
+                s_k = x_new - x
+                y_k = g_new - g
+                sy = float(np.vdot(s_k, y_k))
+                if sy > 1e-12 * float(np.vdot(y_k, y_k)) and sy > 0.0:
+                    S.append(s_k)
+                    Y.append(y_k)
+                    rho.append(1.0 / sy)
+                    if len(S) > acceleration:
+                        S.pop(0), Y.pop(0), rho.pop(0)
+            move = t * float(np.abs(d).max())
+            x, e, g, state = x_new, e_new, g_new, state_new
+            energy.append(e)
             result.iterations = it
-            step = float(np.abs(r).max()) if r.size else 0.0
-            window = energy[max(0, len(energy) - 1 - _WINDOW)] - e_new
-            if (
-                it >= 2
-                and abs(window) <= tolerance * max(e_new, 1e-300)
-                and step <= 100.0 * tolerance * scale
-            ):
+            window = energy[max(0, len(energy) - 1 - _WINDOW)] - e
+            if it >= 2 and abs(window) <= tolerance * max(e, 1e-300) and move <= step_tol:
                 result.converged, result.reason = True, "tolerance"
                 break
             if time_limit is not None and time.perf_counter() - start > time_limit:
@@ -244,10 +315,28 @@ class LocalGlobalSolver:
                 break
         else:
             result.reason = "max_iterations"
-        result.X = g
+        X = np.empty((self.n, 3))
+        X[free] = x
+        X[fixed] = bc
+        result.X = X
         result.energy = energy
         result.timings = dict(clock)
+        result.stats = stats
         return result
 
-    def _energy(self, state: LocalState, targets: list[np.ndarray]) -> float:
-        return float(sum(term.energy(state, t) for term, t in zip(self.terms, targets)))
+    def _two_loop(self, g, S, Y, rho, back_solve):
+        """L-BFGS two-loop recursion: the inverse-Hessian model applied to ``g``.
+
+        The initial inverse Hessian is ``Q_ff⁻¹`` (one back-substitution).
+        """
+        q = g.copy()
+        alpha = []
+        for s, y, r in zip(reversed(S), reversed(Y), reversed(rho)):
+            a = r * float(np.vdot(s, q))
+            q -= a * y
+            alpha.append(a)
+        z = back_solve(q)
+        for (s, y, r), a in zip(zip(S, Y, rho), reversed(alpha)):
+            beta = r * float(np.vdot(y, z))
+            z += (a - beta) * s
+        return z

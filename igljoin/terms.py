@@ -24,6 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .frames import SeamFrames, face_normals_areas, unit, vertex_face_matrix
+from .rotations import fit_rotations
 
 #: Weight ``μ`` of the one-ring edges in the rotation-aware shape term, relative to
 #: the Laplacian. Small: it only fixes the rotations and makes them exact minimisers.
@@ -42,15 +43,38 @@ __all__ = [
 
 @dataclass
 class LocalState:
-    """What the local step shares between terms for one iterate ``X`` (n, 3)."""
+    """What the local step shares between terms for one iterate ``X`` (n, 3).
+
+    Attributes
+    ----------
+    X : ndarray, shape (n, 3)
+        The iterate.
+    rotations : ndarray, shape (n, 3, 3), optional
+        Per-vertex rotations fitted at ``X`` (set by the rotation-aware shape term).
+    cache : dict
+        Products such as ``K X`` computed once per local step.
+    hint : ndarray, shape (3, 3, n), optional
+        Rotations of a nearby iterate (the previous local step's) to start the
+        rotation fit from; they change only how fast it converges.
+    """
 
     X: np.ndarray
     rotations: np.ndarray | None = None
     cache: dict = field(default_factory=dict)
+    hint: np.ndarray | None = None
+
+    def rotations_soa(self) -> np.ndarray | None:
+        """The fitted rotations in structure-of-arrays layout, shape (3, 3, n), if any."""
+        return self.cache.get("R")
 
 
 class Term(ABC):
-    """One quadratic-in-X energy term with a recomputed target."""
+    """One quadratic-in-X energy term with a recomputed target.
+
+    Subclasses set ``K`` (rows × n), ``weights`` (rows,) and :meth:`target`;
+    :meth:`local` and :meth:`quadratic` have generic implementations that a
+    term may replace by faster equivalents.
+    """
 
     name: str
     K: sp.csr_matrix
@@ -82,6 +106,34 @@ class Term(ABC):
         t = self.target(state) if target is None else target
         r = self.applied(state) - t
         return float(np.dot(self.weights, np.einsum("ij,ij->i", r, r)))
+
+    def quadratic(self) -> sp.csr_matrix:
+        """The term's constant quadratic form ``Kᵀ W K``, shape (n, n)."""
+        return sp.csr_matrix(self.K.T @ sp.diags(self.weights) @ self.K)
+
+    def local(self, state: LocalState) -> tuple[float, np.ndarray]:
+        """Local step: energy at ``state.X`` and ``Kᵀ W (K X − target)``, shape (n, 3).
+
+        The second output is half the energy's gradient (every target is the
+        closest point of ``K X`` in a fixed set, so the target's own change
+        does not enter). Summed over the terms it is ``Q X − Σ Kᵀ W target``;
+        the global step is ``X − Q⁻¹`` of it on the free vertices.
+        """
+        t = self.target(state)
+        r = self.applied(state) - t
+        e = float(np.dot(self.weights, np.einsum("ij,ij->i", r, r)))
+        KtW = getattr(self, "_KtW", None)
+        if KtW is None:
+            KtW = self._KtW = sp.csr_matrix(self.K.T @ sp.diags(self.weights))
+        return e, KtW @ r
+
+
+def _edge_vectors(state: LocalState, E: np.ndarray, D: sp.csr_matrix) -> np.ndarray:
+    """``X[E[:, 0]] − X[E[:, 1]]``, shape (e, 3), shared by the terms using the same ``E``."""
+    key = ("edges", id(E))
+    if key not in state.cache:
+        state.cache[key] = D @ state.X
+    return state.cache[key]
 
 
 def unique_edges(F: np.ndarray) -> np.ndarray:
@@ -157,14 +209,24 @@ class ShapeTerm(Term):
         normalised per row.
     rotation_aware : bool
         ``False`` keeps the paper's fixed Laplacian coordinates (no rotations).
+    E : ndarray of int64, shape (e, 2), optional
+        The mesh's unique edges (``unique_edges(F)``); pass the array the
+        stretch term uses so that both share one ``D X`` per local step.
+
+    Notes
+    -----
+    The local step works in structure-of-arrays layout: covariances and
+    rotations have shape (3, 3, n). Rotations are fitted by
+    :func:`igljoin.rotations.fit_rotations`, started from ``state.hint``.
     """
 
     name = "shape"
 
-    def __init__(self, V0, F, weight=1.0, laplacian="uniform", rotation_aware=True):
+    def __init__(self, V0, F, weight=1.0, laplacian="uniform", rotation_aware=True, E=None):
         n = len(V0)
         self.n = n
-        self.E = unique_edges(F)
+        self.E = unique_edges(F) if E is None else np.asarray(E, dtype=np.int64)
+        self.weight = float(weight)
         if laplacian == "cotangent":
             C = -igl.cotmatrix(V0, F).tocsr()
             diag = C.diagonal()
@@ -177,55 +239,134 @@ class ShapeTerm(Term):
             deg = np.asarray(A.sum(axis=1)).ravel()
             L = sp.eye(n, format="csr") - sp.diags(1.0 / np.maximum(deg, 1.0)) @ A
         self.L = sp.csr_matrix(L)
+        self.Lt = sp.csr_matrix(self.L.T)
         self.delta = self.L @ V0
         self.rotation_aware = rotation_aware
+        self._K = None
         if not rotation_aware:
-            self.K = self.L
-            self.weights = np.full(n, float(weight))
+            self._K = self.L
+            self.weights = np.full(n, self.weight)
             return
         mu = ROTATION_REGULARISATION
         ne = len(self.E)
-        D = _difference_operator(self.E, n)
+        self.D = _difference_operator(self.E, n)
+        self.Dt = sp.csr_matrix(self.D.T)
         # rows: Laplacians, then one-ring edges i->j (owned by i) and j->i (owned by j)
-        self.K = sp.vstack([self.L, D, -D], format="csr")
-        self.weights = np.concatenate([np.full(n, float(weight)), np.full(2 * ne, weight * mu)])
+        self.weights = np.concatenate([np.full(n, self.weight), np.full(2 * ne, self.weight * mu)])
         self.rest_edges = V0[self.E[:, 0]] - V0[self.E[:, 1]]
+        # structure-of-arrays copies for the vectorised local step
+        self._deltaT = np.ascontiguousarray(self.delta.T)
+        self._e0T = np.ascontiguousarray(self.rest_edges.T)
         # covariance operator: (M X)[a*n + v, b] = μ Σ_{edges e at v} e0[e, a] (X_i − X_j)[e, b],
-        # the one-ring part of S_v stacked coordinate-major as libigl's fit_rotations wants
+        # the one-ring part of the covariance A_v[b, a] of vertex v
         incidence = sp.csr_matrix(
             (np.ones(2 * ne), (self.E.reshape(-1), np.repeat(np.arange(ne), 2))), shape=(n, ne)
         )
         self.covariance = mu * sp.vstack(
-            [incidence @ sp.diags(self.rest_edges[:, a]) @ D for a in range(3)], format="csr"
+            [incidence @ sp.diags(self.rest_edges[:, a]) @ self.D for a in range(3)], format="csr"
         )
+
+    @property
+    def K(self) -> sp.csr_matrix:
+        """Stacked operator ``[L; D; −D]`` (rotation-aware) or ``L``, built on first use."""
+        if self._K is None:
+            self._K = sp.vstack([self.L, self.D, -self.D], format="csr")
+        return self._K
 
     @property
     def soft_rows(self) -> int:
         """Laplacian constraints only, as the paper counts them."""
         return self.n
 
-    def rotations(self, X: np.ndarray, LX: np.ndarray) -> np.ndarray:
-        """Per-vertex rotations, shape (n, 3, 3), minimising the vertex energies at ``X``."""
-        S = self.covariance @ X
-        S += np.concatenate([self.delta[:, [a]] * LX for a in range(3)])
-        R = igl.fit_rotations(S, False)
-        return R.reshape(3, -1, 3).transpose(1, 0, 2)
+    def quadratic(self) -> sp.csr_matrix:
+        """``w (LᵀL + 2 μ DᵀD)`` (rotation-aware) or ``w LᵀL``, shape (n, n)."""
+        Q = self.Lt @ self.L
+        if self.rotation_aware:
+            Q = Q + (2.0 * ROTATION_REGULARISATION) * (self.Dt @ self.D)
+        return sp.csr_matrix(self.weight * Q)
+
+    def covariances(self, X: np.ndarray, LX: np.ndarray) -> np.ndarray:
+        """Per-vertex covariances ``A_v`` of the rotation fit, shape (3, 3, n).
+
+        ``A_v = l(p′)_v l(p)_vᵀ + μ Σ_j (p′_v − p′_j)(p_v − p_j)ᵀ``; the
+        rotation of vertex ``v`` maximises ``tr(Rᵀ A_v)``.
+        """
+        n = self.n
+        A = np.ascontiguousarray((self.covariance @ X).T).reshape(3, 3, n)
+        A += LX.T[:, None, :] * self._deltaT[None, :, :]
+        return A
+
+    def rotations(self, X: np.ndarray, LX: np.ndarray, hint: np.ndarray | None = None):
+        """Per-vertex rotations, shape (n, 3, 3), minimising the vertex energies at ``X``.
+
+        Parameters
+        ----------
+        X : ndarray, shape (n, 3)
+        LX : ndarray, shape (n, 3)
+            ``L X``.
+        hint : ndarray, shape (3, 3, n), optional
+            Starting rotations (see :func:`igljoin.rotations.fit_rotations`).
+        """
+        R = fit_rotations(self.covariances(X, LX), hint)
+        return R.transpose(2, 0, 1)
+
+    def _fit(self, state: LocalState):
+        """``L X`` (n, 3) and the rotations (3, 3, n) at ``state.X``, cached in ``state``."""
+        cache = state.cache
+        if "LX" not in cache:
+            cache["LX"] = self.L @ state.X
+        if "R" not in cache:
+            R = fit_rotations(self.covariances(state.X, cache["LX"]), state.hint)
+            cache["R"] = R
+            state.rotations = R.transpose(2, 0, 1)
+        return cache["LX"], cache["R"]
+
+    def _rotated(self, state: LocalState):
+        """``R δ`` (3, n) and the rotated rest edges ``R_i e0``, ``R_j e0`` (3, e) each."""
+        key = ("rotated", id(self))
+        if key not in state.cache:
+            _, R = self._fit(state)
+            n = self.n
+            R9 = R.reshape(9, n)
+            Rd = np.einsum("ijn,jn->in", R, self._deltaT)
+            e = len(self.E)
+            G0 = np.take(R9, self.E[:, 0], axis=1).reshape(3, 3, e)
+            a0 = np.einsum("ije,je->ie", G0, self._e0T)
+            G1 = np.take(R9, self.E[:, 1], axis=1).reshape(3, 3, e)
+            a1 = np.einsum("ije,je->ie", G1, self._e0T)
+            state.cache[key] = (Rd, a0, a1)
+        return state.cache[key]
 
     def target(self, state: LocalState) -> np.ndarray:
         if not self.rotation_aware:
             return self.delta
-        KX = self.applied(state)
-        if state.rotations is None:
-            state.rotations = self.rotations(state.X, KX[: self.n])
-        R = state.rotations
-        e0 = self.rest_edges
-        return np.concatenate(
-            [
-                np.einsum("nij,nj->ni", R, self.delta),
-                np.einsum("nij,nj->ni", R[self.E[:, 0]], e0),
-                -np.einsum("nij,nj->ni", R[self.E[:, 1]], e0),
-            ]
+        Rd, a0, a1 = self._rotated(state)
+        return np.concatenate([Rd.T, a0.T, -a1.T])
+
+    def local(self, state: LocalState) -> tuple[float, np.ndarray]:
+        """Energy and half gradient without forming ``K`` (see :meth:`Term.local`)."""
+        w = self.weight
+        if not self.rotation_aware:
+            LX = state.cache.get("LX")
+            if LX is None:
+                LX = state.cache["LX"] = self.L @ state.X
+            r = LX - self.delta
+            return w * float(np.einsum("ij,ij->", r, r)), w * (self.Lt @ r)
+        LX, _ = self._fit(state)
+        Rd, a0, a1 = self._rotated(state)
+        dT = _edge_vectors(state, self.E, self.D).T
+        mu = ROTATION_REGULARISATION
+        r = LX.T - Rd
+        r0 = dT - a0
+        r1 = dT - a1
+        e = np.einsum("ij,ij->", r, r) + mu * (
+            np.einsum("ij,ij->", r0, r0) + np.einsum("ij,ij->", r1, r1)
         )
+        r0 += r1
+        grad = self.Lt @ r.T
+        grad += mu * (self.Dt @ r0.T)
+        grad *= w
+        return w * float(e), grad
 
 
 class StretchTerm(Term):
@@ -246,23 +387,47 @@ class StretchTerm(Term):
     def __init__(self, V0, E, stiffness):
         self.E = E
         self.K = _difference_operator(E, len(V0))
+        self.Kt = sp.csr_matrix(self.K.T)
         self.weights = np.asarray(stiffness, dtype=np.float64)
         self.rest = self.K @ V0
         self.rest_length = np.linalg.norm(self.rest, axis=1)
 
+    def applied(self, state: LocalState) -> np.ndarray:
+        """Edge vectors ``D X``, shape (e, 3), shared with the shape term."""
+        return _edge_vectors(state, self.E, self.K)
+
+    def quadratic(self) -> sp.csr_matrix:
+        """``Dᵀ diag(k) D``, shape (n, n)."""
+        return sp.csr_matrix(self.Kt @ sp.diags(self.weights) @ self.K)
+
     def target(self, state: LocalState) -> np.ndarray:
         d = self.applied(state)
-        length = np.linalg.norm(d, axis=1)
+        length = np.sqrt(np.einsum("ij,ij->i", d, d))
         ok = length > 1e-12 * np.maximum(self.rest_length, 1e-300)
+        if ok.all():
+            return d * (self.rest_length / length)[:, None]
         out = np.where(ok[:, None], d * (self.rest_length / np.where(ok, length, 1.0))[:, None], 0)
-        if not ok.all():
-            # a collapsed edge keeps its rest direction (rotated, when rotations are known)
-            bad = np.flatnonzero(~ok)
-            rest = self.rest[bad]
-            if state.rotations is not None:
-                rest = np.einsum("nij,nj->ni", state.rotations[self.E[bad, 0]], rest)
-            out[bad] = rest
+        # a collapsed edge keeps its rest direction (rotated, when rotations are known)
+        bad = np.flatnonzero(~ok)
+        rest = self.rest[bad]
+        if state.rotations is not None:
+            rest = np.einsum("nij,nj->ni", state.rotations[self.E[bad, 0]], rest)
+        out[bad] = rest
         return out
+
+    def local(self, state: LocalState) -> tuple[float, np.ndarray]:
+        """Energy and half gradient ``Dᵀ diag(k) (D X − s)`` (see :meth:`Term.local`)."""
+        d = self.applied(state)
+        length = np.sqrt(np.einsum("ij,ij->i", d, d))
+        if not (length > 1e-12 * np.maximum(self.rest_length, 1e-300)).all():
+            r = d - self.target(state)
+            e = float(np.dot(self.weights, np.einsum("ij,ij->i", r, r)))
+            r *= self.weights[:, None]
+            return e, self.Kt @ r
+        # d − s = d (1 − L0 / |d|), so ‖d − s‖ = | |d| − L0 |
+        gap = length - self.rest_length
+        e = float(np.dot(self.weights, gap * gap))
+        return e, self.Kt @ (d * (self.weights * gap / length)[:, None])
 
 
 class SmoothJoinTerm(Term):
