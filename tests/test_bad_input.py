@@ -143,6 +143,18 @@ def _tetrahedron():
     return V, F
 
 
+def _case_folder(tmp: Path, toml: str | None, host: bool = True, name: str = "case") -> Path:
+    """A case folder with the patch sample's meshes and the given join.toml."""
+    folder = tmp / name
+    folder.mkdir(exist_ok=True)
+    if host:
+        igljoin.write_mesh(folder / "host.ply", HOST)
+    igljoin.write_mesh(folder / "guest.ply", GUEST)
+    if toml is not None:
+        (folder / "join.toml").write_text(toml, encoding="utf-8")
+    return folder
+
+
 def _corpus() -> list[Case]:
     loops = igljoin.boundary_loops(HOST.F)
     outer, hole = loops[0], loops[1]
@@ -384,6 +396,32 @@ def _corpus() -> list[Case]:
             lambda t: _join("guest.obj"),
             igljoin.MeshError,
             ("expected an igljoin.Mesh", "read_mesh"),
+        ),
+        Case(
+            "case folder without a host mesh",
+            lambda t: igljoin.load_case(_case_folder(t, "", host=False, name="nohost")),
+            igljoin.SpecError,
+            ("host",),
+        ),
+        Case(
+            "case folder with bad TOML",
+            lambda t: igljoin.load_case(_case_folder(t, "[options\n", name="badtoml")),
+            igljoin.SpecError,
+            ("not valid TOML", "join.toml"),
+        ),
+        Case(
+            "case folder with an unknown key",
+            lambda t: igljoin.load_case(_case_folder(t, "colour = 3\n", name="unknown")),
+            igljoin.SpecError,
+            ("colour", "join.toml"),
+        ),
+        Case(
+            "case folder path escaping the folder",
+            lambda t: igljoin.load_case(
+                _case_folder(t, 'host = "../elsewhere/host.ply"\n', name="escape")
+            ),
+            igljoin.SpecError,
+            ("../elsewhere/host.ply", "join.toml"),
         ),
     ]
     return cases
