@@ -674,8 +674,11 @@ def _cmd_demo(parser, args) -> int:
     if args.json:
         _print_json(result)
         return 0
+    paths = result.get("paths") or {}
+    if "table_md" in paths:
+        print(Path(paths["table_md"]).read_text(encoding="utf-8"))
     print(f"demo written to {args.out}")
-    for key, path in (result.get("paths") or {}).items():
+    for key, path in paths.items():
         print(f"  {key}: {path}")
     for note in result.get("notes") or []:
         print(f"  note: {note}")
