@@ -33,6 +33,7 @@ from .join import JoinResult, JoinSolver, join
 from .mesh import Mesh, as_mesh
 from .options import JoinOptions
 from .spec import CaseSpec, load_case
+from .stiffness import stiffness_from_regions
 from .weld import Welded, weld
 
 __version__ = "0.1.0"
@@ -66,6 +67,7 @@ __all__ = [
     "phantoms",
     "read_mesh",
     "select_curve",
+    "stiffness_from_regions",
     "weld",
     "write_mesh",
 ]

@@ -18,7 +18,14 @@ import numpy as np
 from .boundary import SelectedCurve, arc_length_parameters, polyline_length
 from .errors import CurveError
 
-__all__ = ["Correspondence", "pair_curves", "correspond", "curve_points_at"]
+__all__ = [
+    "Correspondence",
+    "pair_curves",
+    "pair_seams",
+    "correspond",
+    "curve_points_at",
+    "rigid_fit",
+]
 
 _FIT_SAMPLES = 128
 
@@ -226,6 +233,109 @@ def pair_curves(
     info["fit_residual"] = residual
     info["reverse_fit_residual"] = candidates["reverse"][0]
     return host, guest.rolled(shift), info
+
+
+def rigid_fit(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Proper rotation ``R`` (3, 3) and translation ``t`` (3,) minimising ‖A Rᵀ + t − B‖.
+
+    ``A`` and ``B`` have shape (q, 3) (Kabsch, without reflection).
+    """
+    ca, cb = A.mean(axis=0), B.mean(axis=0)
+    H = (A - ca).T @ (B - cb)
+    U, _, Vt = np.linalg.svd(H)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
+    R = Vt.T @ D @ U.T
+    return R, cb - ca @ R.T
+
+
+def _fit_residual(X: np.ndarray, Y: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Summed squared distances ``‖Y[c] Rᵀ + t − X‖²`` for each candidate ``c``; ``Y`` (c, q, 3)."""
+    D = Y @ R.T + t - X
+    return np.einsum("cqj,cqj->c", D, D)
+
+
+def pair_seams(
+    Vh: np.ndarray,
+    hosts: list[SelectedCurve],
+    Vg: np.ndarray,
+    guests: list[SelectedCurve],
+    *,
+    guest_starts_given: list[bool],
+    rounds: int = 10,
+) -> list[tuple[SelectedCurve, SelectedCurve, dict]]:
+    """Pair the curves of several seams of one guest, with consistent starts.
+
+    Each seam is first paired on its own (:func:`pair_curves`). With several
+    seams, the starts of closed guest curves without a given start are then
+    chosen together: one rigid motion of the guest is fitted to all seams at
+    once and each such curve is started where it fits the host curve best
+    under that motion, alternately, until the starts no longer change. A
+    guest whose ends are nearly round (a graft) is so not twisted between
+    its seams, which fitting each end on its own does not prevent. The
+    choice does not depend on where the guest is placed.
+
+    Parameters
+    ----------
+    Vh, Vg : ndarray, shape (n_h, 3), (n_g, 3)
+    hosts, guests : list of SelectedCurve
+        The curves of each seam.
+    guest_starts_given : list of bool
+        Keep the guest curve's first vertex as its start, per seam.
+    rounds : int
+        Most fit/start alternations.
+
+    Returns
+    -------
+    list of (SelectedCurve, SelectedCurve, dict)
+        Per seam as :func:`pair_curves` returns; ``info`` gains
+        ``joint_fit_residual`` (RMS distance, in the mesh's length unit, of
+        all resampled guest curves from their host curves after the common
+        rigid fit) when several seams were paired together.
+    """
+    paired = [
+        pair_curves(Vh, h, Vg, g, guest_start_given=given)
+        for h, g, given in zip(hosts, guests, guest_starts_given)
+    ]
+    if len(paired) < 2:
+        return paired
+    free = [
+        i
+        for i, ((h, _, _), given) in enumerate(zip(paired, guest_starts_given))
+        if h.closed and not given
+    ]
+    X = [_resample(Vh[h.indices], h.closed, _FIT_SAMPLES) for h, _, _ in paired]
+    guest = [g for _, g, _ in paired]
+    # closed free curves: every cyclic roll of one resampling is a candidate start
+    base = {i: _resample(Vg[guest[i].indices], True, _FIT_SAMPLES) for i in free}
+    rolls = {i: np.stack([np.roll(base[i], -j, axis=0) for j in range(_FIT_SAMPLES)]) for i in free}
+    current = [_resample(Vg[g.indices], g.closed, _FIT_SAMPLES) for g in guest]
+    for _ in range(rounds if free else 0):
+        R, t = rigid_fit(np.vstack(current), np.vstack(X))
+        changed = False
+        for i in free:
+            g = guest[i]
+            coarse = _first_minimum(_fit_residual(X[i], rolls[i], R, t))
+            # refine: the guest vertices nearest that roll in arc length, compared exactly
+            tv, _ = arc_length_parameters(Vg[g.indices], True)
+            k = len(g.indices)
+            near = int(np.argmin(np.abs(((tv - coarse / _FIT_SAMPLES) + 0.5) % 1.0 - 0.5)))
+            shifts = (near + np.arange(-3, 4)) % k
+            cand = np.stack(
+                [_resample(Vg[np.roll(g.indices, -j)], True, _FIT_SAMPLES) for j in shifts]
+            )
+            j = int(shifts[_first_minimum(_fit_residual(X[i], cand, R, t))])
+            if j:
+                guest[i] = g.rolled(j)
+                base[i] = _resample(Vg[guest[i].indices], True, _FIT_SAMPLES)
+                rolls[i] = np.stack([np.roll(base[i], -r, axis=0) for r in range(_FIT_SAMPLES)])
+                current[i] = base[i]
+                changed = True
+        if not changed:
+            break
+    R, t = rigid_fit(np.vstack(current), np.vstack(X))
+    D = np.vstack(current) @ R.T + t - np.vstack(X)
+    rms = float(np.sqrt(np.einsum("ij,ij->i", D, D).mean()))
+    return [(h, g, {**info, "joint_fit_residual": rms}) for (h, _, info), g in zip(paired, guest)]
 
 
 def correspond(

@@ -4,28 +4,43 @@ The steps follow the paper: select the boundary curves (§3), map them onto
 each other and insert host points into the guest (§4.1), build the shape,
 stretch and smooth-join terms (§4.2–4.4) and minimise them under the hard
 seam constraints by a local/global iteration (§4.5).
+
+Several seams (``seams=[(host_curve, guest_curve), ...]``) are joined in one
+solve: the correspondence runs seam after seam on the progressively refined
+guest, each seam gets its own smooth-join term, and all seam vertices are
+the fixed vertices of one factorization.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from . import metrics
-from .boundary import Curve, boundary_loops, select_curve
-from .correspond import correspond, pair_curves
-from .errors import OptionsError
+from .boundary import Curve, SelectedCurve, boundary_loops, select_curve
+from .correspond import Correspondence, correspond, pair_seams, rigid_fit
+from .errors import CurveError, OptionsError
 from .frames import SeamFrames, face_normals_areas, seam_frames, unit
 from .mesh import Mesh, as_mesh
 from .options import JoinOptions
-from .result import JoinResult
+from .result import JoinedSeam, JoinResult
 from .solve import LocalGlobalSolver
-from .terms import ShapeTerm, SmoothJoinTerm, StretchTerm, edge_stiffness, unique_edges
+from .stiffness import stiffness_from_attribute, stiffness_from_regions
+from .terms import (
+    LocalState,
+    ShapeTerm,
+    SmoothJoinTerm,
+    StretchTerm,
+    edge_stiffness,
+    unique_edges,
+)
 from .validate import check_guest_reaches_seam, check_surface
 
-__all__ = ["JoinSolver", "JoinResult", "join"]
+__all__ = ["JoinSolver", "JoinResult", "SeamPair", "join"]
 
 # options that change the quadratic form (and so need a new factorization)
 _STRUCTURAL = {
@@ -44,15 +59,12 @@ _STRUCTURAL = {
     "linear_solver",
 }
 
+_SHOWN = 5  # shared vertices listed in an error message
 
-def _rigid_fit(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation R (3, 3) and translation t (3,) minimising ‖A Rᵀ + t − B‖ (proper rotation)."""
-    ca, cb = A.mean(axis=0), B.mean(axis=0)
-    H = (A - ca).T @ (B - cb)
-    U, _, Vt = np.linalg.svd(H)
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
-    R = Vt.T @ D @ U.T
-    return R, cb - ca @ R.T
+#: Mean angle (degrees) between the cross-seam edges of the initial guess and
+#: the host continued across a seam above which the initial guess is first
+#: turned towards the host (:meth:`JoinSolver._turn_to_host`).
+TURN_ANGLE = 60.0
 
 
 def _interpolate_frames(frames: SeamFrames, edge: np.ndarray, t: np.ndarray, closed: bool):
@@ -68,22 +80,247 @@ def _interpolate_frames(frames: SeamFrames, edge: np.ndarray, t: np.ndarray, clo
     return SeamFrames(normal=normal, tangent=lerp(frames.tangent), inward=inward)
 
 
+@dataclass(frozen=True)
+class SeamPair:
+    """The two curves of one seam, resolved and paired.
+
+    Attributes
+    ----------
+    host_index : int
+        Host mesh the curve is on (0 for a single host mesh).
+    host_curve : SelectedCurve
+        On the combined host (indices into ``JoinSolver.host``).
+    guest_curve : SelectedCurve
+        On the guest, paired: guest vertex 0 corresponds to host vertex 0.
+    pairing : dict
+        Rigid-fit residuals of the start search (see :func:`pair_curves`).
+    """
+
+    host_index: int
+    host_curve: SelectedCurve
+    guest_curve: SelectedCurve
+    pairing: dict = field(default_factory=dict)
+
+
+def _host_list(host: Any) -> list | None:
+    """The host meshes if ``host`` is a list of meshes, else ``None`` (one mesh)."""
+    if not isinstance(host, (list, tuple)) or not host:
+        return None
+    if all(isinstance(h, Mesh) for h in host):
+        return list(host)
+    if isinstance(host, list) and all(isinstance(h, tuple) and len(h) == 2 for h in host):
+        return list(host)
+    return None
+
+
+def _combined_host(hosts: list[Mesh]) -> tuple[Mesh, np.ndarray]:
+    """Several host meshes as one mesh (vertices and faces concatenated) and vertex offsets."""
+    offsets = np.cumsum([0] + [h.n_vertices for h in hosts]).astype(np.int64)
+    V = np.vstack([h.V for h in hosts])
+    F = np.vstack([h.F + o for h, o in zip(hosts, offsets)])
+    return Mesh(V, F, name="host"), offsets
+
+
+def _seam_specs(seams: Any, n_hosts: int, host_list: bool) -> list[tuple[int | None, Any, Any]]:
+    """``(host index or None, host curve spec, guest curve spec)`` per seam, validated."""
+    if isinstance(seams, (str, bytes, Mapping)) or not isinstance(seams, Sequence) or not seams:
+        raise CurveError(
+            "seams must be a non-empty list of (host_curve, guest_curve) or (host_index, "
+            f"host_curve, guest_curve) tuples, got {seams!r:.80}"
+        )
+    out = []
+    for i, item in enumerate(seams):
+        if not isinstance(item, (tuple, list)) or len(item) not in (2, 3):
+            raise CurveError(
+                f"seams[{i}] must be a (host_curve, guest_curve) or (host_index, host_curve, "
+                f"guest_curve) tuple, got {item!r:.80}"
+            )
+        if len(item) == 2:
+            out.append((None, item[0], item[1]))
+            continue
+        index = item[0]
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
+            raise CurveError(
+                f"seams[{i}]: the first of three entries is the host index and must be an "
+                f"integer, got {index!r:.40}; give (host_index, host_curve, guest_curve) or "
+                "(host_curve, guest_curve)"
+            )
+        if not 0 <= int(index) < n_hosts:
+            what = f"there are {n_hosts} host meshes" if host_list else "there is one host mesh"
+            raise CurveError(
+                f"seams[{i}]: host index {int(index)} does not exist; {what} "
+                f"(indices 0..{n_hosts - 1}) — pass host=[mesh0, mesh1, ...] to join several"
+            )
+        out.append((int(index), item[1], item[2]))
+    return out
+
+
+def _check_disjoint(pairs: list[SeamPair]) -> None:
+    """Raise :class:`CurveError` if two seams share a host or a guest vertex."""
+    for side in ("guest", "host"):
+        curves = [getattr(p, f"{side}_curve").indices for p in pairs]
+        owner = np.concatenate([np.full(len(c), i) for i, c in enumerate(curves)])
+        ids = np.concatenate(curves)
+        order = np.argsort(ids, kind="stable")
+        same = np.flatnonzero(ids[order][1:] == ids[order][:-1])
+        if not same.size:
+            continue
+        i, j = sorted({int(owner[order[same[0]]]), int(owner[order[same[0] + 1]])})
+        shared = np.intersect1d(curves[i], curves[j])
+        raise CurveError(
+            f"seams[{i}] and seams[{j}] share {shared.size} {side} vertices "
+            f"({shared[:_SHOWN].tolist()}); each boundary vertex can belong to one seam only — "
+            f"give {side} curves that neither overlap nor touch (different loops, or open "
+            "curves with a gap between them)"
+        )
+
+
+def _combined_correspondence(parts: list[Correspondence], host_sizes: list[int]):
+    """The correspondences of consecutive seams as one (see ``JoinResult.correspondence``)."""
+    if len(parts) == 1:
+        return parts[0]
+    last = parts[-1]
+    parent = parts[0].face_parent
+    for c in parts[1:]:
+        parent = parent[c.face_parent]
+    seam_off = np.cumsum([0] + [len(c.seam) for c in parts[:-1]])
+    host_off = np.cumsum([0] + host_sizes[:-1])
+    return Correspondence(
+        V=last.V,
+        F=last.F,
+        face_parent=parent,
+        n_original=parts[0].n_original,
+        seam=np.concatenate([c.seam for c in parts]),
+        targets=np.vstack([c.targets for c in parts]),
+        seam_t=np.concatenate([c.seam_t for c in parts]),
+        host_hit=np.concatenate([c.host_hit + o for c, o in zip(parts, seam_off)]),
+        host_edge=np.concatenate([c.host_edge + o for c, o in zip(parts, host_off)]),
+        host_edge_t=np.concatenate([c.host_edge_t for c in parts]),
+        inserted_from=np.vstack([c.inserted_from.reshape(-1, 2) for c in parts]),
+        inserted_t=np.concatenate([c.inserted_t for c in parts]),
+    )
+
+
+def _combined_gap(gaps: list[dict], counts: list[int]) -> dict:
+    """Seam gap over several seams: largest maximum, mean over all seam vertices."""
+    if len(gaps) == 1:
+        return gaps[0]
+    w = np.asarray(counts, dtype=np.float64) / float(sum(counts))
+    return {
+        "max": max(g["max"] for g in gaps),
+        "mean": float(sum(wi * g["mean"] for wi, g in zip(w, gaps))),
+        "relative_max": max(g["relative_max"] for g in gaps),
+        "relative_mean": float(sum(wi * g["relative_mean"] for wi, g in zip(w, gaps))),
+    }
+
+
+def _guest_mesh(guest: Any) -> Mesh:
+    """The guest as a :class:`Mesh` named "guest" (attributes kept)."""
+    mesh = as_mesh(guest, "guest")
+    if mesh.name == "mesh":
+        mesh = Mesh(mesh.V, mesh.F, mesh.vertex_attributes, mesh.face_attributes, name="guest")
+    return mesh
+
+
+def _given(options: Any, overrides: dict, name: str) -> Any:
+    """The value of option ``name`` in ``overrides``, else in ``options``, else ``None``."""
+    if name in overrides:
+        return overrides[name]
+    if isinstance(options, JoinOptions):
+        return getattr(options, name)
+    if isinstance(options, Mapping):
+        return options.get(name)
+    return None
+
+
+def _needs_guest(options: Any, overrides: dict, regions: Any) -> bool:
+    """Whether the stiffness must be resolved against the guest (regions or a name)."""
+    return regions is not None or isinstance(_given(options, overrides, "stiffness"), str)
+
+
+def _resolve_stiffness(guest: Mesh, options: Any, overrides: dict, regions: Any) -> dict:
+    """``overrides`` with ``stiffness`` given as regions or as an attribute name made an array.
+
+    Parameters
+    ----------
+    guest : Mesh
+    options : JoinOptions, dict or None
+    overrides : dict
+        Keyword options; ``overrides["stiffness"]`` (or ``options``') may be a
+        guest attribute name.
+    regions : list of (vertex_indices, k) or None
+
+    Returns
+    -------
+    dict
+        ``overrides`` with ``stiffness`` (ndarray) and ``stiffness_on`` set.
+    """
+    given = _given(options, overrides, "stiffness")
+    if regions is not None:
+        if given is not None:
+            raise OptionsError(
+                "give either stiffness or stiffness_regions, not both; for regions on top of a "
+                "map, pass stiffness=stiffness_from_regions(n, regions, default=...) yourself"
+            )
+        values, on = stiffness_from_regions(guest.n_vertices, regions), "vertex"
+    else:
+        values, on = stiffness_from_attribute(guest, given)
+    on_given = _given(options, overrides, "stiffness_on")
+    if on_given not in (None, "auto", on):
+        raise OptionsError(
+            f"stiffness_on={on_given!r} but the stiffness map is per {on}; leave stiffness_on "
+            "unset (it is set from where the map was found)"
+        )
+    return {**overrides, "stiffness": values, "stiffness_on": on}
+
+
 class JoinSolver:
     """Prepare a join once; solve it, and re-solve cheaply.
 
     Parameters
     ----------
-    host : Mesh or (V, F)
-        The rigid host.
+    host : Mesh or (V, F), or list of them
+        The rigid host: one mesh (possibly of several components), or a
+        list of meshes, which are joined as one host whose vertices are
+        those of the meshes in order (``JoinResult.host_offsets``).
     guest : Mesh or (V, F)
         The flexible guest.
     host_curve, guest_curve : None, Curve, mapping, int or array_like of int
-        The boundary curves to join (see :class:`igljoin.Curve`). ``None``
-        takes the only boundary loop; for a closed guest curve without a
-        start, the start is found by fitting the curves rigidly.
+        The boundary curves of a single seam (see :class:`igljoin.Curve`).
+        ``None`` takes the only boundary loop; for a closed guest curve
+        without a start, the start is found by fitting the curves rigidly.
+        Not together with ``seams``.
     options : JoinOptions or dict, optional
+    seams : list of tuple, optional
+        Several seams joined in one solve, each ``(host_curve, guest_curve)``
+        or ``(host_index, host_curve, guest_curve)``. With ``host_index``
+        the host curve is selected on ``host[host_index]`` (its own vertex
+        indices and loops); without it, on the combined host (vertex
+        indices of the concatenated hosts). Seams may not share a vertex,
+        on the host or on the guest. ``seams=[(hc, gc)]`` is the same as
+        ``host_curve=hc, guest_curve=gc``.
+    stiffness_regions : list of (vertex_indices, k), optional
+        Relative stiffness ``k`` of regions of guest vertices (1 elsewhere),
+        see :func:`igljoin.stiffness_from_regions`. Not together with
+        ``stiffness``.
     **overrides
-        Individual options (see :class:`igljoin.JoinOptions`).
+        Individual options (see :class:`igljoin.JoinOptions`). ``stiffness``
+        may also name a per-vertex or per-face attribute of the guest
+        (``stiffness="name"``).
+
+    Attributes
+    ----------
+    host : Mesh
+        The (combined) host.
+    hosts : list of Mesh
+        The host meshes as given (one for a single mesh).
+    guest : Mesh
+    pairs : list of SeamPair
+        The resolved curves of each seam.
+    host_curve, guest_curve : SelectedCurve or None
+        The curves of a single seam (``None`` with several; see ``pairs``).
+    corr : Correspondence
+        Of all seams together (see ``JoinResult.correspondence``).
 
     Notes
     -----
@@ -108,49 +345,117 @@ class JoinSolver:
         host_curve: Any = None,
         guest_curve: Any = None,
         options: JoinOptions | dict | None = None,
+        *,
+        seams: Any = None,
+        stiffness_regions: Any = None,
         **overrides: Any,
     ):
         t0 = time.perf_counter()
+        guest_mesh = None
+        if _needs_guest(options, overrides, stiffness_regions):
+            guest_mesh = _guest_mesh(guest)
+            overrides = _resolve_stiffness(guest_mesh, options, overrides, stiffness_regions)
         self.options = JoinOptions.make(options, **overrides)
-        self.host = as_mesh(host, "host")
-        self.guest = as_mesh(guest, "guest")
-        if self.host.name == "mesh":
-            self.host = Mesh(self.host.V, self.host.F, name="host")
-        if self.guest.name == "mesh":
-            self.guest = Mesh(self.guest.V, self.guest.F, name="guest")
-        check_surface(self.host, "host")
+        hosts = _host_list(host)
+        if hosts is None:
+            self.host = as_mesh(host, "host")
+            if self.host.name == "mesh":
+                self.host = Mesh(self.host.V, self.host.F, name="host")
+            self.hosts = [self.host]
+            self.host_offsets = np.array([0, self.host.n_vertices], dtype=np.int64)
+        else:
+            self.hosts = [as_mesh(h, f"host[{i}]") for i, h in enumerate(hosts)]
+            self.hosts = [
+                Mesh(h.V, h.F, name=f"host[{i}]") if h.name == "mesh" else h
+                for i, h in enumerate(self.hosts)
+            ]
+            self.host, self.host_offsets = _combined_host(self.hosts)
+        self.guest = _guest_mesh(guest) if guest_mesh is None else guest_mesh
+        if hosts is None:
+            check_surface(self.host, "host")
+        else:
+            for h in self.hosts:
+                check_surface(h, h.name)
         check_surface(self.guest, "guest")
-        hc = select_curve(self.host, host_curve, name="host_curve")
-        gspec = Curve.coerce(guest_curve, "guest_curve")
-        gc = select_curve(self.guest, gspec, name="guest_curve")
-        start_given = gspec.start is not None or gspec.indices is not None
-        self.host_curve, self.guest_curve, self.pairing = pair_curves(
-            self.host.V, hc, self.guest.V, gc, guest_start_given=start_given
+        if seams is None:
+            specs = [(None, host_curve, guest_curve)]
+            names = [("host_curve", "guest_curve")]
+        else:
+            if host_curve is not None or guest_curve is not None:
+                raise CurveError(
+                    "give either seams=[(host_curve, guest_curve), ...] or host_curve and "
+                    "guest_curve, not both; put the single seam into the seams list"
+                )
+            specs = _seam_specs(seams, len(self.hosts), hosts is not None)
+            names = [
+                (f"seams[{i}] host curve", f"seams[{i}] guest curve") for i in range(len(specs))
+            ]
+        resolved = [self._select(*spec, *name) for spec, name in zip(specs, names)]
+        _check_disjoint(resolved)
+        paired = pair_seams(
+            self.host.V,
+            [r.host_curve for r in resolved],
+            self.guest.V,
+            [r.guest_curve for r in resolved],
+            guest_starts_given=[bool(r.pairing["start_given"]) for r in resolved],
         )
+        self.pairs = [
+            SeamPair(r.host_index, hc, gc, info) for r, (hc, gc, info) in zip(resolved, paired)
+        ]
+        single = len(self.pairs) == 1
+        self.host_curve = self.pairs[0].host_curve if single else None
+        self.guest_curve = self.pairs[0].guest_curve if single else None
+        self.pairing = self.pairs[0].pairing if single else {}
         self.factorizations = 0
         self.last_run = None  # IterationResult of the latest solve (iteration statistics)
         self.timings: dict[str, float] = {"select": time.perf_counter() - t0}
         self._prepare()
+
+    def _select(
+        self, index: int | None, hspec: Any, gspec: Any, hname: str, gname: str
+    ) -> SeamPair:
+        """Resolve the curves of one seam (not yet paired; ``pairing`` holds ``start_given``)."""
+        if index is None:
+            hc = select_curve(self.host, hspec, name=hname)
+            index = int(np.searchsorted(self.host_offsets, hc.indices[0], side="right") - 1)
+        else:
+            sub = select_curve(self.hosts[index], hspec, name=hname)
+            if len(self.hosts) == 1:
+                hc = sub
+            else:
+                off = int(self.host_offsets[index])
+                hc = select_curve(
+                    self.host, Curve(indices=sub.indices + off, closed=sub.closed), name=hname
+                )
+        g = Curve.coerce(gspec, gname)
+        gc = select_curve(self.guest, g, name=gname)
+        start_given = g.start is not None or g.indices is not None
+        return SeamPair(index, hc, gc, {"start_given": start_given})
 
     # -- set-up -----------------------------------------------------------------------------
 
     def _prepare(self) -> None:
         t0 = time.perf_counter()
         opt = self.options
-        self.corr = correspond(
-            self.guest.V,
-            self.guest.F,
-            self.guest_curve,
-            self.host.V,
-            self.host_curve,
-            snap_tolerance=opt.snap_tolerance,
-        )
+        V, F = self.guest.V, self.guest.F
+        parts = []
+        for p in self.pairs:
+            part = correspond(
+                V, F, p.guest_curve, self.host.V, p.host_curve, snap_tolerance=opt.snap_tolerance
+            )
+            V, F = part.V, part.F
+            parts.append(part)
+        self.parts = parts
+        self.corr = _combined_correspondence(parts, [len(p.host_curve.indices) for p in self.pairs])
         c = self.corr
         check_guest_reaches_seam(c.F, len(c.V), c.seam)
         t1 = time.perf_counter()
-        hv = self.host.V[self.host_curve.indices]
-        seg = np.roll(hv, -1, axis=0) - hv if self.host_curve.closed else np.diff(hv, axis=0)
-        self.host_mean_edge = float(np.linalg.norm(seg, axis=1).mean())
+        self.host_mean_edges = []
+        for p in self.pairs:
+            hv = self.host.V[p.host_curve.indices]
+            seg = np.roll(hv, -1, axis=0) - hv if p.host_curve.closed else np.diff(hv, axis=0)
+            self.host_mean_edges.append(float(np.linalg.norm(seg, axis=1).mean()))
+        self.host_mean_edge = float(np.mean(self.host_mean_edges))
         self.E = unique_edges(c.F)
         self.guest_mean_edge = float(
             np.linalg.norm(c.V[self.E[:, 0]] - c.V[self.E[:, 1]], axis=1).mean()
@@ -163,51 +468,46 @@ class JoinSolver:
         if opt.stretch_weight > 0:
             k = edge_stiffness(self.E, c.F, *self._stiffness())
             terms.append(StretchTerm(c.V, self.E, opt.stretch_weight * k))
+        self.smooth_tolerances_deg = []
         if opt.smooth and opt.smooth_weight > 0:
-            radius = None if opt.smooth_mode == "paper" else opt.smooth_radius * self.host_mean_edge
-            radius = radius or None
-            frames = seam_frames(
-                self.host.V,
-                self.host.F,
-                self.host_curve.indices,
-                self.host_curve.closed,
-                radius=radius,
-            )
-            at_seam = _interpolate_frames(
-                frames, c.host_edge, c.host_edge_t, self.host_curve.closed
-            )
-            self.smooth_tolerance_deg = self._smooth_tolerance(frames)
-            terms.append(
-                SmoothJoinTerm(
-                    c.V,
-                    c.F,
-                    c.seam,
-                    at_seam,
-                    opt.smooth_weight,
-                    opt.smooth_mode,
-                    np.radians(self.smooth_tolerance_deg),
+            for p, part, mean_edge in zip(self.pairs, parts, self.host_mean_edges):
+                hc = p.host_curve
+                radius = None if opt.smooth_mode == "paper" else opt.smooth_radius * mean_edge
+                radius = radius or None
+                frames = seam_frames(self.host.V, self.host.F, hc.indices, hc.closed, radius=radius)
+                at_seam = _interpolate_frames(frames, part.host_edge, part.host_edge_t, hc.closed)
+                tolerance = self._smooth_tolerance(frames, hc)
+                self.smooth_tolerances_deg.append(tolerance)
+                terms.append(
+                    SmoothJoinTerm(
+                        c.V,
+                        c.F,
+                        part.seam,
+                        at_seam,
+                        opt.smooth_weight,
+                        opt.smooth_mode,
+                        np.radians(tolerance),
+                    )
                 )
-            )
+        self.smooth_tolerance_deg = max(self.smooth_tolerances_deg, default=0.0)
         self.terms = terms
         t2 = time.perf_counter()
         self.solver = LocalGlobalSolver(terms, len(c.V), c.seam, opt.linear_solver)
         self.factorizations += 1
         self.timings.update(correspond=t1 - t0, terms=t2 - t1, factor=self.solver.factor_seconds)
 
-    def _smooth_tolerance(self, smoothed: SeamFrames) -> float:
+    def _smooth_tolerance(self, smoothed: SeamFrames, hc: SelectedCurve) -> float:
         """Crease (degrees) the robust smooth join tolerates: the host's own normal noise.
 
         The median angle between the host's one-ring and smoothed cross-seam
-        directions along the curve, unless ``smooth_tolerance`` is given.
+        directions along the curve ``hc``, unless ``smooth_tolerance`` is given.
         """
         opt = self.options
         if opt.smooth_mode == "paper" or (opt.smooth_tolerance is None and opt.smooth_radius == 0):
             return 0.0
         if opt.smooth_tolerance is not None:
             return float(opt.smooth_tolerance)
-        onering = seam_frames(
-            self.host.V, self.host.F, self.host_curve.indices, self.host_curve.closed
-        )
+        onering = seam_frames(self.host.V, self.host.F, hc.indices, hc.closed)
         cos = np.clip(np.einsum("ij,ij->i", onering.inward, smoothed.inward), -1.0, 1.0)
         return float(np.degrees(np.median(np.arccos(cos))))
 
@@ -240,8 +540,14 @@ class JoinSolver:
 
     # -- solving ----------------------------------------------------------------------------
 
-    def update(self, **changes: Any) -> None:
-        """Change options; the factorization is rebuilt only if the quadratic form changes."""
+    def update(self, *, stiffness_regions: Any = None, **changes: Any) -> None:
+        """Change options; the factorization is rebuilt only if the quadratic form changes.
+
+        ``stiffness`` may name a guest attribute, and ``stiffness_regions``
+        replaces the stiffness map, as in the constructor.
+        """
+        if _needs_guest(None, changes, stiffness_regions):
+            changes = _resolve_stiffness(self.guest, None, changes, stiffness_regions)
         new = self.options.replace(**changes)
         old = self.options
         self.options = new
@@ -252,16 +558,64 @@ class JoinSolver:
     def initial_guess(self, targets: np.ndarray | None = None) -> np.ndarray:
         """Rigidly aligned rest guest, with the seam displacement smoothly extended.
 
+        One rigid motion fits all seam vertices (of every seam) onto their
+        targets; the remaining seam displacement is then extended smoothly
+        (``Q u = 0`` on the free vertices), so a guest whose ends go to two
+        different places starts bent towards both. If the guest then leaves
+        some seam at a large angle to the host continued across it (a tube
+        sewn end-to-side onto a hole, see :meth:`_turn_to_host`), one global
+        step turns it towards the host first.
+
         Returns shape (n', 3).
         """
         c = self.corr
         bc = c.targets if targets is None else targets
-        R, t = _rigid_fit(c.V[c.seam], bc)
+        R, t = rigid_fit(c.V[c.seam], bc)
         X = c.V @ R.T + t
         if self.options.initial_guess == "extend":
             X = X + self.solver.extend(bc - X[c.seam])
             X = self._bulge(X)
+            X = self._turn_to_host(X, bc)
         return X
+
+    def _turn_to_host(self, X: np.ndarray, bc: np.ndarray) -> np.ndarray:
+        """One global step with the smooth-join targets fixed to the host continued.
+
+        The robust smooth-join target projects each cross-seam edge onto the
+        host's tangent plane, so an edge that starts steeper than 90° to the
+        host continued settles folded back over the host (a 180° crease). When
+        the guest leaves some seam at more than :data:`TURN_ANGLE` degrees on
+        average, this step — the minimiser of the energy with the smooth
+        terms' targets set to the host's cross-seam direction at rest length
+        (the paper's fixed target) and the other targets taken at ``X`` —
+        starts the iteration on the right side. It reuses the factorization.
+
+        Parameters
+        ----------
+        X : ndarray, shape (n', 3)
+        bc : ndarray, shape (s, 3)
+            Seam targets.
+
+        Returns
+        -------
+        ndarray, shape (n', 3)
+            ``X`` itself when no seam is that steep (the paper's samples).
+        """
+        smooth = [term for term in self.terms if isinstance(term, SmoothJoinTerm)]
+        if not smooth:
+            return X
+        state = LocalState(X)
+        steepest = 1.0
+        for term in smooth:
+            d = unit(term.applied(state))
+            steepest = min(steepest, float(np.einsum("ij,ij->i", d, term.outward).mean()))
+        if steepest >= np.cos(np.radians(TURN_ANGLE)):
+            return X
+        targets = [
+            term.fixed_target if isinstance(term, SmoothJoinTerm) else term.target(state)
+            for term in self.terms
+        ]
+        return self.solver.global_step(targets, bc)
 
     def _bulge(self, X: np.ndarray) -> np.ndarray:
         """Lift a compressed disk-like guest off its plane so that it bulges instead of shrinking.
@@ -274,7 +628,7 @@ class JoinSolver:
         so that the guest's area is its rest area.
         """
         c = self.corr
-        if not self.host_curve.closed or len(boundary_loops(c.F)) != 1:
+        if len(self.pairs) != 1 or not self.host_curve.closed or len(boundary_loops(c.F)) != 1:
             return X
         rest = face_normals_areas(c.V, c.F)[1].sum()
         if face_normals_areas(X, c.F)[1].sum() >= (1.0 - 1e-3) * rest:
@@ -310,7 +664,8 @@ class JoinSolver:
         Parameters
         ----------
         targets : ndarray, shape (s, 3), optional
-            New positions for the seam vertices (default: the host curve
+            New positions for the seam vertices, in the order of
+            ``JoinResult.seam`` (seam after seam; default: the host curve
             correspondence). Reuses the factorization.
         **changes
             Option changes applied first (see :meth:`update`).
@@ -372,7 +727,7 @@ class JoinSolver:
     def _result(self, run, bc) -> JoinResult:
         c = self.corr
         X = run.X
-        hc = self.host_curve
+        host = self.host
         ratio = metrics.area_ratio(c.V, X, c.F)
         strain = metrics.edge_strain(c.V, X, self.E)
         vertex_strain = metrics.vertex_strain(self.E, strain, len(X))
@@ -391,11 +746,51 @@ class JoinSolver:
             name="deformed guest",
         )
         rest = Mesh(c.V, c.F, name="rest guest")
-        guest_at_host = c.seam[c.host_hit]
-        crease = metrics.crease_angles(
-            self.host.V, self.host.F, hc.indices, X, c.F, guest_at_host, hc.closed
-        )
-        host_dihedral = metrics.host_dihedral_angles(self.host.V, self.host.F, hc.indices)
+        seams, per_seam, gaps = [], [], []
+        start = 0
+        for p, part in zip(self.pairs, self.parts):
+            hc = p.host_curve
+            s = len(part.seam)
+            crease = metrics.crease_angles(
+                host.V, host.F, hc.indices, X, c.F, part.seam[part.host_hit], hc.closed
+            )
+            gap = metrics.seam_gap(X[part.seam], host.V[hc.indices], hc.closed)
+            gaps.append(gap)
+            dihedral = metrics.host_dihedral_angles(host.V, host.F, hc.indices)
+            seams.append(
+                JoinedSeam(
+                    host_index=p.host_index,
+                    host_curve=hc.indices.copy(),
+                    seam=part.seam.copy(),
+                    closed=hc.closed,
+                    targets=np.array(bc[start : start + s]),
+                    host_hit=part.host_hit.copy(),
+                    host_edge=part.host_edge.copy(),
+                    host_edge_t=part.host_edge_t.copy(),
+                    inserted=len(part.inserted_t),
+                    crease=crease,
+                    pairing=dict(p.pairing),
+                )
+            )
+            per_seam.append(
+                {
+                    "host_index": p.host_index,
+                    "closed": hc.closed,
+                    "seam": s,
+                    "host_curve": len(hc.indices),
+                    "inserted": len(part.inserted_t),
+                    "seam_gap": gap,
+                    "crease_deg": metrics.summary(crease),
+                    "host_dihedral_deg": {
+                        **metrics.summary(dihedral),
+                        "rings": metrics.HOST_DIHEDRAL_RINGS,
+                    },
+                }
+            )
+            start += s
+        host_curve = np.concatenate([sm.host_curve for sm in seams])
+        crease = np.concatenate([sm.crease for sm in seams])
+        host_dihedral = metrics.host_dihedral_angles(host.V, host.F, host_curve)
         rows = sum(t.soft_rows for t in self.terms)
         counts = {
             "points": len(c.V),
@@ -404,14 +799,15 @@ class JoinSolver:
             "seam": len(c.seam),
             "inserted": len(c.inserted_t),
             "faces": len(c.F),
-            "host_curve": len(hc.indices),
+            "host_curve": len(host_curve),
+            "seams": len(seams),
         }
         folds = metrics.folded_pairs(c.V, X, c.F)
         total_ratio = float(
             face_normals_areas(X, c.F)[1].sum() / face_normals_areas(c.V, c.F)[1].sum()
         )
         m = {
-            "seam_gap": metrics.seam_gap(X[c.seam], self.host.V[hc.indices], hc.closed),
+            "seam_gap": _combined_gap(gaps, [len(sm.seam) for sm in seams]),
             "crease_deg": {**metrics.summary(crease)},
             "host_dihedral_deg": {
                 **metrics.summary(host_dihedral),
@@ -423,15 +819,16 @@ class JoinSolver:
             "vertex_strain": metrics.summary(vertex_strain),
             "displacement_nonrigid": metrics.summary(displacement),
             "folded_pairs": len(folds),
+            "seams": per_seam,
         }
         result = JoinResult(
             host=self.host,
             guest=guest,
             rest_guest=rest,
             seam=c.seam.copy(),
-            host_curve=hc.indices.copy(),
+            host_curve=host_curve,
             seam_targets=np.array(bc),
-            closed=hc.closed,
+            closed=all(sm.closed for sm in seams),
             area_ratio=ratio,
             converged=run.converged,
             iterations=run.iterations,
@@ -443,7 +840,9 @@ class JoinSolver:
             crease=crease,
             metrics=m,
             stop_reason=run.reason,
-            pairing=self.pairing,
+            pairing=dict(self.pairing),
+            seams=seams,
+            host_offsets=self.host_offsets.copy(),
         )
         # weld (kept in the result) and count self-intersections near the seam
         result.metrics.update(result.measure_weld())
@@ -467,25 +866,54 @@ def join(
     host_curve: Any = None,
     guest_curve: Any = None,
     *,
+    seams: Any = None,
     smooth: bool = True,
+    stiffness_regions: Any = None,
     **options: Any,
 ) -> JoinResult:
-    """Deform ``guest`` so that its curve joins ``host``'s curve exactly and smoothly.
+    """Deform ``guest`` so that its curves join ``host``'s curves exactly and smoothly.
 
-    Same as ``JoinSolver(host, guest, host_curve, guest_curve, smooth=smooth, **options).solve()``.
+    Same as ``JoinSolver(host, guest, host_curve, guest_curve, seams=seams,
+    smooth=smooth, stiffness_regions=stiffness_regions, **options).solve()``.
 
     Parameters
     ----------
-    host, guest : Mesh or (V, F)
+    host : Mesh or (V, F), or list of them
+        One host mesh, or several joined as one (see :class:`JoinSolver`).
+    guest : Mesh or (V, F)
     host_curve, guest_curve : curve specification, optional
-        See :class:`igljoin.Curve`.
+        The curves of a single seam; see :class:`igljoin.Curve`.
+    seams : list of tuple, optional
+        Several seams in one solve: ``(host_curve, guest_curve)`` or
+        ``(host_index, host_curve, guest_curve)`` each (instead of
+        ``host_curve``/``guest_curve``).
     smooth : bool
-        Include the smooth-join term.
+        Include the smooth-join terms.
+    stiffness_regions : list of (vertex_indices, k), optional
+        Relative stiffness of regions of guest vertices (1 elsewhere).
     **options
-        See :class:`igljoin.JoinOptions`.
+        See :class:`igljoin.JoinOptions`; ``stiffness`` may be an array
+        (per guest vertex or face) or the name of a guest attribute.
 
     Returns
     -------
     JoinResult
+
+    Examples
+    --------
+    >>> import igljoin
+    >>> g = igljoin.phantoms.bypass_graft_sample()
+    >>> res = igljoin.join(g.hosts, g.guest, seams=g.seams)
+    >>> res.converged, len(res.seams)
+    (True, 2)
     """
-    return JoinSolver(host, guest, host_curve, guest_curve, smooth=smooth, **options).solve()
+    return JoinSolver(
+        host,
+        guest,
+        host_curve,
+        guest_curve,
+        seams=seams,
+        smooth=smooth,
+        stiffness_regions=stiffness_regions,
+        **options,
+    ).solve()

@@ -19,7 +19,7 @@ from .metrics import SELF_INTERSECTION_RINGS, ring_band, self_intersections
 from .options import JoinOptions
 from .weld import Welded, weld
 
-__all__ = ["JoinResult", "plain_json"]
+__all__ = ["JoinResult", "JoinedSeam", "plain_json"]
 
 
 def plain_json(value: Any) -> Any:
@@ -53,6 +53,58 @@ def _with_quality(mesh: Mesh) -> Mesh:
     return mesh.with_attributes(vertex=vertex, face=face)
 
 
+@dataclass(frozen=True, eq=False)
+class JoinedSeam:
+    """One seam of a join: a guest curve held on a host curve.
+
+    Attributes
+    ----------
+    host_index : int
+        Which host mesh the curve is on (0 for a single host mesh).
+    host_curve : ndarray of int64, shape (k,)
+        Host curve vertices in curve order, as indices into the combined
+        host ``JoinResult.host``.
+    seam : ndarray of int64, shape (s,)
+        Guest seam vertices in curve order (indices into ``JoinResult.guest``).
+    closed : bool
+    targets : ndarray, shape (s, 3)
+        Where each seam vertex was held.
+    host_hit : ndarray of int64, shape (k,)
+        For each host curve vertex, the position in ``seam`` of the guest
+        vertex on it.
+    host_edge : ndarray of int64, shape (s,)
+        For each seam vertex, the segment of ``host_curve`` it lies on
+        (segment ``j`` joins ``host_curve[j]`` and ``host_curve[j + 1]``,
+        wrapping on a closed curve).
+    host_edge_t : ndarray, shape (s,)
+        Position within that segment, in ``[0, 1]``.
+    inserted : int
+        Guest vertices inserted on this seam.
+    crease : ndarray, shape (k,)
+        Crease angle (degrees) at each host curve vertex.
+    pairing : dict
+        Rigid-fit residuals of the start search (closed curves; see
+        :func:`igljoin.correspond.pair_curves`).
+    """
+
+    host_index: int
+    host_curve: np.ndarray
+    seam: np.ndarray
+    closed: bool
+    targets: np.ndarray
+    host_hit: np.ndarray
+    host_edge: np.ndarray
+    host_edge_t: np.ndarray
+    inserted: int
+    crease: np.ndarray
+    pairing: dict = field(default_factory=dict)
+
+    @property
+    def guest_at_host(self) -> np.ndarray:
+        """Guest vertex lying on each host curve vertex, shape (k,)."""
+        return self.seam[self.host_hit]
+
+
 @dataclass
 class JoinResult:
     """The deformed guest and everything measured about the join.
@@ -60,7 +112,8 @@ class JoinResult:
     Attributes
     ----------
     host : Mesh
-        The host, unchanged.
+        The host, unchanged. Several host meshes are concatenated into one
+        (vertices and faces in the order given; see :attr:`host_offsets`).
     guest : Mesh
         Deformed guest: original vertices first in original order, inserted
         seam vertices after. Face attribute ``area_ratio``; vertex attributes
@@ -70,12 +123,17 @@ class JoinResult:
         The guest before deformation, with the inserted seam vertices (same
         connectivity as ``guest``).
     seam : ndarray of int64, shape (s,)
-        Guest seam vertices in curve order.
+        Guest seam vertices in curve order. With several seams: every
+        seam's vertices, seam after seam (the concatenation of
+        ``seams[i].seam``); the order of ``seam_targets`` and of
+        ``solve(targets=...)``.
     host_curve : ndarray of int64, shape (k,)
-        Host curve vertices in curve order.
+        Host curve vertices in curve order. With several seams: the
+        concatenation of ``seams[i].host_curve`` (not one polyline).
     seam_targets : ndarray, shape (s, 3)
         Where each seam vertex was held.
     closed : bool
+        The curve is a loop. With several seams: every curve is a loop.
     area_ratio : ndarray, shape (m,)
         Deformed over rest area per guest face.
     converged : bool
@@ -89,13 +147,34 @@ class JoinResult:
         Seconds per phase.
     options : JoinOptions
     correspondence : Correspondence
+        With several seams, the correspondence of all of them together:
+        ``V``, ``F``, ``face_parent``, ``inserted_*`` describe the guest
+        refined on every seam; ``seam``, ``targets``, ``seam_t``,
+        ``host_edge_t`` are concatenated seam after seam, ``host_hit``
+        indexes the concatenated ``seam`` and ``host_edge`` the
+        concatenated ``host_curve`` (a segment never crosses from one seam
+        to the next; use :attr:`seams` for per-seam curves).
     crease : ndarray, shape (k,)
-        Crease angle (degrees) at each host curve vertex.
+        Crease angle (degrees) at each host curve vertex (concatenated over
+        the seams).
     metrics : dict
         Plain-JSON join quality: seam gap, crease angles and the host's own
         dihedral angles near the seam, area ratio, edge and vertex strain,
         displacement, folds, weld counts and seam self-intersections (see
-        ``docs/results.md``).
+        ``docs/results.md``); ``metrics["seams"]`` repeats the seam gap,
+        crease and host dihedral angles for each seam, the top-level values
+        are over all seams (the largest relative gap, the mean over all seam
+        vertices).
+    stop_reason : str
+        ``"tolerance"``, ``"max_iterations"`` or ``"time_limit"``.
+    pairing : dict
+        Rigid-fit residuals of the closed-curve start search (one seam;
+        empty with several seams, see ``seams[i].pairing``).
+    seams : list of JoinedSeam
+        Each seam (one entry for a single-seam join), in the order given.
+    host_offsets : ndarray of int64, shape (h + 1,)
+        Host mesh ``i`` has the combined host vertices
+        ``host_offsets[i]:host_offsets[i + 1]`` (``[0, n_h]`` for one host).
     merged : Welded
         Host and deformed guest welded into one mesh (computed on first use,
         then kept; see :func:`igljoin.weld.weld`).
@@ -120,6 +199,8 @@ class JoinResult:
     metrics: dict = field(default_factory=dict)
     stop_reason: str = ""
     pairing: dict = field(default_factory=dict)
+    seams: list = field(default_factory=list)
+    host_offsets: np.ndarray | None = None
     _merged: Welded | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
@@ -200,6 +281,17 @@ class JoinResult:
                 "metrics": self.metrics,
                 "options": self.options.to_json(),
                 "pairing": {k: float(v) for k, v in self.pairing.items()},
+                "seams": [
+                    {
+                        "host_index": int(sm.host_index),
+                        "closed": bool(sm.closed),
+                        "seam": int(len(sm.seam)),
+                        "host_curve": int(len(sm.host_curve)),
+                        "inserted": int(sm.inserted),
+                        "pairing": {k: float(v) for k, v in sm.pairing.items()},
+                    }
+                    for sm in self.seams
+                ],
             }
         )
 

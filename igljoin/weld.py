@@ -14,6 +14,9 @@ order. Along the seam the two surfaces share vertices:
   vertex that the host adopted, and the guest is where its values
   (strain, displacement) come from.
 
+With several seams (``JoinResult.seams``) every seam is welded this way in
+the same mesh: each seam's host edges are split and its vertices shared.
+
 The result is checked (edge-manifold, vertex-manifold, every interior edge
 used once in each direction, no zero-area face); a failure raises
 :class:`~igljoin.errors.WeldError` naming the seam vertices involved.
@@ -81,9 +84,12 @@ class Welded:
         (possible for open curves; never for closed curves, whose guest seam
         is paired against the host's face-induced direction).
     seam : ndarray of int64, shape (s,)
-        Merged ids of the seam vertices in curve order.
+        Merged ids of the seam vertices in curve order (with several seams,
+        seam after seam).
     n_splits : int
         Host curve edge splits, i.e. seam vertices that are not host vertices.
+    seams : tuple of ndarray of int64
+        Merged ids of each seam's vertices in curve order, shape (s_i,) each.
     """
 
     mesh: Mesh
@@ -93,6 +99,7 @@ class Welded:
     flipped_guest: bool
     seam: np.ndarray
     n_splits: int
+    seams: tuple = ()
 
     @property
     def n_shared(self) -> int:
@@ -127,6 +134,38 @@ def _guest_vertex_maps(result: JoinResult) -> tuple[np.ndarray, np.ndarray]:
     return strain, disp
 
 
+def _seam_parts(result: JoinResult) -> list[tuple]:
+    """Per seam ``(host_curve, seam, closed, host_hit, host_edge, host_edge_t)`` of a result.
+
+    From ``result.seams``; a result without them (built by hand) is one seam
+    described by ``host_curve``, ``seam``, ``closed`` and ``correspondence``.
+    """
+    seams = getattr(result, "seams", None)
+    if seams:
+        return [
+            (
+                np.asarray(sm.host_curve, dtype=np.int64),
+                np.asarray(sm.seam, dtype=np.int64),
+                bool(sm.closed),
+                np.asarray(sm.host_hit, dtype=np.int64),
+                sm.host_edge,
+                sm.host_edge_t,
+            )
+            for sm in seams
+        ]
+    c = result.correspondence
+    return [
+        (
+            np.asarray(result.host_curve, dtype=np.int64),
+            np.asarray(result.seam, dtype=np.int64),
+            bool(result.closed),
+            np.asarray(c.host_hit, dtype=np.int64),
+            c.host_edge,
+            c.host_edge_t,
+        )
+    ]
+
+
 def _directed_count(F: np.ndarray, u: np.ndarray, v: np.ndarray, n: int) -> np.ndarray:
     """How many faces of ``F`` hold the directed edge ``u[i] -> v[i]``, shape (len(u),)."""
     key = np.concatenate([F[:, 0] * n + F[:, 1], F[:, 1] * n + F[:, 2], F[:, 2] * n + F[:, 0]])
@@ -154,14 +193,17 @@ def weld(result: JoinResult, *, check: bool = True) -> Welded:
         shared, ``k`` of them with host curve vertices and ``s − k`` with
         vertices inserted into host curve edges (each insertion splits one
         host triangle in two). ``n_g``, ``m_g`` count the refined guest
-        (``result.guest``).
+        (``result.guest``). With several seams, ``s`` and ``k`` are the
+        totals over the seams.
 
     Raises
     ------
     WeldError
-        The guest seam is not on the host curve, or the merged mesh would be
-        non-manifold, inconsistently oriented or have zero-area faces; the
-        message names the seam vertices involved.
+        The guest seam is not on the host curve, the guest would have to be
+        flipped for some seams and not for others (open curves on hosts
+        facing different ways), or the merged mesh would be non-manifold,
+        inconsistently oriented or have zero-area faces; the message names
+        the seam vertices involved.
 
     Examples
     --------
@@ -181,67 +223,100 @@ def weld(result: JoinResult, *, check: bool = True) -> Welded:
         )
     Vh, Fh = result.host.V, result.host.F
     X, Fg = result.guest.V, result.guest.F
-    hc = np.asarray(result.host_curve, dtype=np.int64)
-    seam = np.asarray(result.seam, dtype=np.int64)
-    k, s, nh, ng = len(hc), len(seam), len(Vh), len(X)
+    nh, ng = len(Vh), len(X)
+    parts = _seam_parts(result)
+    several = len(parts) > 1
 
-    # where each seam vertex lies on the host curve
-    at_vertex = np.full(s, -1, dtype=np.int64)
-    at_vertex[c.host_hit] = np.arange(k)
-    split = np.flatnonzero(at_vertex < 0)
-    hit = np.flatnonzero(at_vertex >= 0)
-    e = np.asarray(c.host_edge, dtype=np.int64)
-    t = np.asarray(c.host_edge_t, dtype=np.float64)
-    a, b = hc[e], hc[(e + 1) % k]
-    P = Vh[a] * (1.0 - t)[:, None] + Vh[b] * t[:, None]
-    P[hit] = Vh[hc[at_vertex[hit]]]
-    seg = np.diff(Vh[np.append(hc, hc[0]) if result.closed else hc], axis=0)
-    scale = float(np.linalg.norm(seg, axis=1).mean())
-    gap = np.linalg.norm(X[seam] - P, axis=1)
-    off = np.flatnonzero(gap > SEAM_TOLERANCE * scale)
-    if off.size:
-        raise WeldError(
-            f"weld: {off.size} guest seam vertices are off the host curve by up to "
-            f"{gap.max():.3g} ({gap.max() / scale:.3g} host seam edges; guest vertices "
-            f"{seam[off][:_SHOWN].tolist()}); only a result whose seam is held on the host "
-            "curve can be welded — solve with the default targets"
-        )
+    # where each seam vertex lies on its host curve: on a host vertex (hit) or inside an edge
+    hit_guest, hit_host = [], []
+    split_guest, split_a, split_b, split_t, split_P = [], [], [], [], []
+    for i, (hc, seam, closed, host_hit, host_edge, host_edge_t) in enumerate(parts):
+        k, s = len(hc), len(seam)
+        at_vertex = np.full(s, -1, dtype=np.int64)
+        at_vertex[host_hit] = np.arange(k)
+        split = np.flatnonzero(at_vertex < 0)
+        hit = np.flatnonzero(at_vertex >= 0)
+        e = np.asarray(host_edge, dtype=np.int64)
+        t = np.asarray(host_edge_t, dtype=np.float64)
+        a, b = hc[e], hc[(e + 1) % k]
+        P = Vh[a] * (1.0 - t)[:, None] + Vh[b] * t[:, None]
+        P[hit] = Vh[hc[at_vertex[hit]]]
+        seg = np.diff(Vh[np.append(hc, hc[0]) if closed else hc], axis=0)
+        scale = float(np.linalg.norm(seg, axis=1).mean())
+        gap = np.linalg.norm(X[seam] - P, axis=1)
+        off = np.flatnonzero(gap > SEAM_TOLERANCE * scale)
+        if off.size:
+            where = f"seam {i}: " if several else ""
+            raise WeldError(
+                f"weld: {where}{off.size} guest seam vertices are off the host curve by up to "
+                f"{gap.max():.3g} ({gap.max() / scale:.3g} host seam edges; guest vertices "
+                f"{seam[off][:_SHOWN].tolist()}); only a result whose seam is held on the host "
+                "curve can be welded — solve with the default targets"
+            )
+        hit_guest.append(seam[hit])
+        hit_host.append(hc[at_vertex[hit]])
+        split_guest.append(seam[split])
+        split_a.append(a[split])
+        split_b.append(b[split])
+        split_t.append(t[split])
+        split_P.append(P[split])
+    hit_guest, hit_host = np.concatenate(hit_guest), np.concatenate(hit_host)
+    split_guest = np.concatenate(split_guest)
+    split_a, split_b = np.concatenate(split_a), np.concatenate(split_b)
+    split_t, split_P = np.concatenate(split_t), np.concatenate(split_P)
 
     # merged vertex ids of guest vertices: host curve vertex, or appended after the host
     drop = np.zeros(ng, dtype=bool)
-    drop[seam[hit]] = True
+    drop[hit_guest] = True
     keep = np.flatnonzero(~drop)
     g2m = np.empty(ng, dtype=np.int64)
     g2m[keep] = nh + np.arange(len(keep))
-    g2m[seam[hit]] = hc[at_vertex[hit]]
+    g2m[hit_guest] = hit_host
     V = np.vstack([Vh, X[keep]])
-    V[g2m[seam[split]]] = P[split]  # exactly on the host edge: the host does not move
+    V[g2m[split_guest]] = split_P  # exactly on the host edge: the host does not move
 
     # split host boundary triangles into fans at the adopted guest vertices
-    if split.size:
+    if split_guest.size:
         try:
-            Fh2, parent = _split_boundary_faces(Fh, a[split], b[split], t[split], nh)
+            Fh2, parent = _split_boundary_faces(Fh, split_a, split_b, split_t, nh)
         except CurveError:
             raise WeldError(
                 "weld: a host curve edge belongs to no host face; the host curve must follow "
                 "boundary edges of the host"
             ) from None
         new = Fh2 >= nh
-        Fh2[new] = g2m[seam[split[Fh2[new] - nh]]]
+        Fh2[new] = g2m[split_guest[Fh2[new] - nh]]
     else:
         Fh2, parent = Fh.copy(), np.arange(len(Fh), dtype=np.int64)
     Fg2 = g2m[Fg]
 
     # orientation: the two sides must use each seam edge in opposite directions
-    mseam = g2m[seam]
-    u = mseam if result.closed else mseam[:-1]
-    v = np.roll(mseam, -1) if result.closed else mseam[1:]
     n = len(V)
-    host_dir = np.sign(_directed_count(Fh2, u, v, n).sum() - _directed_count(Fh2, v, u, n).sum())
-    guest_dir = np.sign(_directed_count(Fg2, u, v, n).sum() - _directed_count(Fg2, v, u, n).sum())
-    flipped = bool(host_dir != 0 and host_dir == guest_dir)
+    mseams = [g2m[seam] for _, seam, *_ in parts]
+    same, opposite = [], []
+    for i, (mseam, (_, _, closed, *_)) in enumerate(zip(mseams, parts)):
+        u = mseam if closed else mseam[:-1]
+        v = np.roll(mseam, -1) if closed else mseam[1:]
+        host_dir = np.sign(
+            _directed_count(Fh2, u, v, n).sum() - _directed_count(Fh2, v, u, n).sum()
+        )
+        guest_dir = np.sign(
+            _directed_count(Fg2, u, v, n).sum() - _directed_count(Fg2, v, u, n).sum()
+        )
+        if host_dir != 0 and host_dir == guest_dir:
+            same.append(i)
+        elif host_dir != 0 and host_dir == -guest_dir:
+            opposite.append(i)
+    if same and opposite:
+        raise WeldError(
+            f"weld: the guest runs along the host at seams {same} but against it at seams "
+            f"{opposite}; no orientation of the guest fits every host — reverse the faces of "
+            "the host(s) of one group (F[:, ::-1]) so that all hosts face the same way"
+        )
+    flipped = bool(same)
     if flipped:
         Fg2 = Fg2[:, [0, 2, 1]]
+    mseam = np.concatenate(mseams)
 
     F = np.vstack([Fh2, Fg2])
     mh, mg = len(Fh2), len(Fg2)
@@ -283,7 +358,8 @@ def weld(result: JoinResult, *, check: bool = True) -> Welded:
         seam_flag=seam_flag,
         flipped_guest=flipped,
         seam=mseam,
-        n_splits=int(split.size),
+        n_splits=int(split_guest.size),
+        seams=tuple(mseams),
     )
     if check:
         check_welded(welded)
