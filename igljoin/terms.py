@@ -512,6 +512,10 @@ class SmoothJoinTerm(Term):
         n = self.normal
         z = np.einsum("ij,ij->i", d, n)
         p = d - z[:, None] * n
+        # the half-plane continuing the host: an edge pointing back into the host keeps
+        # only its component along the seam (a fold-back is not a resting point)
+        out = self.outward
+        p = p - np.minimum(np.einsum("ij,ij->i", p, out), 0.0)[:, None] * out
         plen = np.linalg.norm(p, axis=1)
         if self.tolerance == 0.0:
             return p
