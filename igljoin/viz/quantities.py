@@ -18,6 +18,7 @@ from ..terms import LocalState, unique_edges
 
 __all__ = [
     "cross_seam_directions",
+    "seam_curves",
     "guest_fields",
     "vertex_displacement",
     "vertex_edge_strain",
@@ -168,9 +169,18 @@ def cross_seam_directions(result: Any) -> tuple[np.ndarray, np.ndarray, np.ndarr
         smooth join the two coincide; the angle between them is the crease.
     """
     host = result.host
-    P = host.V[result.host_curve]
-    h = seam_frames(host.V, host.F, result.host_curve, result.closed)
-    g = seam_frames(
-        result.guest.V, result.guest.F, result.guest_at_host, result.closed, curve_points=P
-    )
-    return P, h.normal, -h.inward, g.inward
+    parts = []
+    for curve, at_host, closed in seam_curves(result):
+        P = host.V[curve]
+        h = seam_frames(host.V, host.F, curve, closed)
+        g = seam_frames(result.guest.V, result.guest.F, at_host, closed, curve_points=P)
+        parts.append((P, h.normal, -h.inward, g.inward))
+    return tuple(np.concatenate(column) for column in zip(*parts))
+
+
+def seam_curves(result: Any) -> list[tuple[np.ndarray, np.ndarray, bool]]:
+    """Per seam of ``result``: host curve, guest vertex on each host curve vertex, closed."""
+    seams = getattr(result, "seams", None)
+    if seams:
+        return [(sm.host_curve, sm.seam[sm.host_hit], sm.closed) for sm in seams]
+    return [(result.host_curve, result.guest_at_host, result.closed)]

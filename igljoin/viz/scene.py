@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import OptionsError
 from . import colors
-from .quantities import cross_seam_directions, guest_fields
+from .quantities import cross_seam_directions, guest_fields, seam_curves
 
 __all__ = ["QUANTITIES", "Scene", "hidden_scenes"]
 
@@ -114,8 +114,19 @@ class Scene:
             edge_width=0.6 if edges else 0.0,
             edge_color=(0.35, 0.35, 0.38),
         )
+        nodes, edges_ = [], []
+        for curve, _, closed in seam_curves(result):
+            k, start = len(curve), sum(len(x) for x in nodes)
+            idx = np.arange(k) + start
+            edges_.append(
+                np.stack([idx, np.roll(idx, -1)], 1) if closed else np.stack([idx[:-1], idx[1:]], 1)
+            )
+            nodes.append(result.host.V[curve])
         self.seam = ps.register_curve_network(
-            self.name("seam"), P, "loop" if result.closed else "line", color=colors.SEAM_COLOR
+            self.name("seam"),
+            np.concatenate(nodes),
+            np.concatenate(edges_),
+            color=colors.SEAM_COLOR,
         )
         self.seam.set_radius(SEAM_RADIUS * self.seam_edge, relative=False)
         self.tangents = bool(tangents)

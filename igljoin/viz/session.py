@@ -42,6 +42,16 @@ _ACTIVE: list = []
 
 def _solver_from_result(result: JoinResult) -> JoinSolver:
     """A solver that reproduces ``result``: its rest guest (seam points already inserted)."""
+    seams = getattr(result, "seams", None)
+    if seams and len(seams) > 1:
+        pairs = [
+            (
+                Curve(indices=sm.host_curve, closed=sm.closed),
+                Curve(indices=sm.seam, closed=sm.closed),
+            )
+            for sm in seams
+        ]
+        return JoinSolver(result.host, result.rest_guest, seams=pairs, options=result.options)
     return JoinSolver(
         result.host,
         result.rest_guest,
