@@ -241,3 +241,22 @@ def test_render_meshes_names_the_colour_shape():
     rgb, background = render_meshes(s.host, s.guest, np.ones((len(s.guest.F), 3)), cam, (64, 48))
     assert rgb.shape == (48, 64, 3) and rgb.dtype == np.uint8
     assert len(background) == 3
+
+
+def test_demo_goes_beyond_the_paper(run):
+    """The bypass graft (two seams, one solve) and the stiff-half patch are in the demo."""
+    out, result = run
+    report = json.loads((out / "report.json").read_text())
+    extra = report["beyond_the_paper"]
+    bypass, patch = extra["bypass_graft"], extra["stiff_patch"]
+    assert bypass["converged"] and patch["converged"]
+    # the issue's bound for the bypass creases: mean below 2 degrees at each seam
+    assert all(c < 2.0 for c in bypass["crease_mean_deg_per_seam"])
+    assert len(bypass["crease_mean_deg_per_seam"]) == 2
+    # the issue's bound: the 10x stiffer half changes at most half as much as the soft half
+    assert patch["median_area_change_stiff"] <= 0.5 * patch["median_area_change_soft"]
+    for name in ("bypass_graft", "stiff_patch"):
+        for f in ("guest.ply", "merged.ply", "report.json"):
+            assert (out / name / f).is_file()
+        assert result["paths"][name].is_file()
+    assert "Beyond the paper" in (out / "table.md").read_text()
