@@ -25,6 +25,7 @@ __all__ = [
     "correspond",
     "curve_points_at",
     "rigid_fit",
+    "split_boundary_faces",
 ]
 
 _FIT_SAMPLES = 128
@@ -430,7 +431,7 @@ def correspond(
     b = U[(ins_seg + 1) % n_u]
     new_V = Vg[a] * (1.0 - ins_frac)[:, None] + Vg[b] * ins_frac[:, None]
     V = np.vstack([Vg, new_V])
-    F, parent = _split_boundary_faces(Fg, a, b, ins_frac, n0)
+    F, parent = split_boundary_faces(Fg, a, b, ins_frac, n0)
     return Correspondence(
         V=V,
         F=F,
@@ -447,7 +448,7 @@ def correspond(
     )
 
 
-def _split_boundary_faces(F, a, b, frac, n0):
+def split_boundary_faces(F, a, b, frac, n0):
     """Replace each boundary face whose edge (a, b) received new vertices by a fan.
 
     Parameters

@@ -31,7 +31,6 @@ from .result import JoinedSeam, JoinResult
 from .solve import LocalGlobalSolver
 from .stiffness import stiffness_from_attribute, stiffness_from_regions
 from .terms import (
-    LocalState,
     ShapeTerm,
     SmoothJoinTerm,
     StretchTerm,
@@ -61,10 +60,6 @@ _STRUCTURAL = {
 
 _SHOWN = 5  # shared vertices listed in an error message
 
-#: Mean angle (degrees) between the cross-seam edges of the initial guess and
-#: the host continued across a seam above which the initial guess is first
-#: turned towards the host (:meth:`JoinSolver._turn_to_host`).
-TURN_ANGLE = 60.0
 
 
 def _interpolate_frames(frames: SeamFrames, edge: np.ndarray, t: np.ndarray, closed: bool):
@@ -561,10 +556,7 @@ class JoinSolver:
         One rigid motion fits all seam vertices (of every seam) onto their
         targets; the remaining seam displacement is then extended smoothly
         (``Q u = 0`` on the free vertices), so a guest whose ends go to two
-        different places starts bent towards both. If the guest then leaves
-        some seam at a large angle to the host continued across it (a tube
-        sewn end-to-side onto a hole, see :meth:`_turn_to_host`), one global
-        step turns it towards the host first.
+        different places starts bent towards both.
 
         Returns shape (n', 3).
         """
@@ -575,47 +567,7 @@ class JoinSolver:
         if self.options.initial_guess == "extend":
             X = X + self.solver.extend(bc - X[c.seam])
             X = self._bulge(X)
-            X = self._turn_to_host(X, bc)
         return X
-
-    def _turn_to_host(self, X: np.ndarray, bc: np.ndarray) -> np.ndarray:
-        """One global step with the smooth-join targets fixed to the host continued.
-
-        The robust smooth-join target projects each cross-seam edge onto the
-        host's tangent plane, so an edge that starts steeper than 90° to the
-        host continued settles folded back over the host (a 180° crease). When
-        the guest leaves some seam at more than :data:`TURN_ANGLE` degrees on
-        average, this step — the minimiser of the energy with the smooth
-        terms' targets set to the host's cross-seam direction at rest length
-        (the paper's fixed target) and the other targets taken at ``X`` —
-        starts the iteration on the right side. It reuses the factorization.
-
-        Parameters
-        ----------
-        X : ndarray, shape (n', 3)
-        bc : ndarray, shape (s, 3)
-            Seam targets.
-
-        Returns
-        -------
-        ndarray, shape (n', 3)
-            ``X`` itself when no seam is that steep (the paper's samples).
-        """
-        smooth = [term for term in self.terms if isinstance(term, SmoothJoinTerm)]
-        if not smooth:
-            return X
-        state = LocalState(X)
-        steepest = 1.0
-        for term in smooth:
-            d = unit(term.applied(state))
-            steepest = min(steepest, float(np.einsum("ij,ij->i", d, term.outward).mean()))
-        if steepest >= np.cos(np.radians(TURN_ANGLE)):
-            return X
-        targets = [
-            term.fixed_target if isinstance(term, SmoothJoinTerm) else term.target(state)
-            for term in self.terms
-        ]
-        return self.solver.global_step(targets, bc)
 
     def _bulge(self, X: np.ndarray) -> np.ndarray:
         """Lift a compressed disk-like guest off its plane so that it bulges instead of shrinking.

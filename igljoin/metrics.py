@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .correspond import rigid_fit
 from .errors import OptionsError
 from .frames import face_normals_areas, seam_frames
 
@@ -123,16 +124,6 @@ def vertex_strain(E: np.ndarray, strain: np.ndarray, n: int) -> np.ndarray:
         return np.where(count > 0, total / np.maximum(count, 1), np.nan)
 
 
-def _rigid_fit(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation R (3, 3) and translation t (3,) minimising ‖A Rᵀ + t − B‖ (proper rotation)."""
-    ca, cb = A.mean(axis=0), B.mean(axis=0)
-    H = (A - ca).T @ (B - cb)
-    U, _, Vt = np.linalg.svd(H)
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
-    R = Vt.T @ D @ U.T
-    return R, cb - ca @ R.T
-
-
 def nonrigid_displacement(V0: np.ndarray, V1: np.ndarray) -> np.ndarray:
     """Distance of each deformed vertex from the rigidly aligned rest vertex.
 
@@ -152,7 +143,7 @@ def nonrigid_displacement(V0: np.ndarray, V1: np.ndarray) -> np.ndarray:
     """
     V0 = np.asarray(V0, dtype=np.float64)
     V1 = np.asarray(V1, dtype=np.float64)
-    R, t = _rigid_fit(V0, V1)
+    R, t = rigid_fit(V0, V1)
     return np.linalg.norm(V1 - (V0 @ R.T + t), axis=1)
 
 

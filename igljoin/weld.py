@@ -31,7 +31,7 @@ import igl
 import numpy as np
 
 from . import metrics
-from .correspond import _split_boundary_faces
+from .correspond import split_boundary_faces
 from .errors import CurveError, WeldError
 from .mesh import Mesh
 
@@ -278,7 +278,7 @@ def weld(result: JoinResult, *, check: bool = True) -> Welded:
     # split host boundary triangles into fans at the adopted guest vertices
     if split_guest.size:
         try:
-            Fh2, parent = _split_boundary_faces(Fh, split_a, split_b, split_t, nh)
+            Fh2, parent = split_boundary_faces(Fh, split_a, split_b, split_t, nh)
         except CurveError:
             raise WeldError(
                 "weld: a host curve edge belongs to no host face; the host curve must follow "
