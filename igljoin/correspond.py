@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .boundary import SelectedCurve, arc_length_parameters, polyline_length
+from .boundary import SelectedCurve, _segment_lengths, arc_length_parameters, polyline_length
 from .errors import CurveError
 
 __all__ = [
@@ -155,15 +155,169 @@ def _best_start(X: np.ndarray, Vg: np.ndarray, g: SelectedCurve, fixed: bool):
         Y = _resample(Vg[g.indices], True, _FIT_SAMPLES)[None]
         return float(_rigid_residuals(X, Y)[0]), 0, g
     Y = _resample(Vg[g.indices], True, _FIT_SAMPLES)
-    rolls = np.stack([np.roll(Y, -j, axis=0) for j in range(_FIT_SAMPLES)])
-    best = _first_minimum(_rigid_residuals(X, rolls))
+    best = _best_cyclic_shift(X, Y)
     t, _ = arc_length_parameters(Vg[g.indices], True)
     near = int(np.argmin(np.abs(((t - best / _FIT_SAMPLES) + 0.5) % 1.0 - 0.5)))
     shifts = (near + np.arange(-3, 4)) % k
-    Ys = np.stack([_resample(Vg[np.roll(g.indices, -j)], True, _FIT_SAMPLES) for j in shifts])
+    Ys = _resample_shifted(Vg[g.indices], shifts, _FIT_SAMPLES)
     res = _rigid_residuals(X, Ys)
     j = _first_minimum(res)
     return float(res[j]), int(shifts[j]), g
+
+
+def _cyclic_shifts(Y: np.ndarray, shifts: np.ndarray | None = None) -> np.ndarray:
+    """Cyclic shifts of a sample array, ``out[c] = np.roll(Y, -shifts[c], axis=0)``.
+
+    Parameters
+    ----------
+    Y : ndarray, shape (s, 3)
+    shifts : ndarray of int, shape (c,), optional
+        Shifts to take; all ``s`` of them (``0 .. s - 1``) by default.
+
+    Returns
+    -------
+    ndarray, shape (c, s, 3)
+    """
+    s = len(Y)
+    shifts = np.arange(s) if shifts is None else np.asarray(shifts)
+    return Y[(shifts[:, None] + np.arange(s)[None, :]) % s]
+
+
+def _best_cyclic_shift(X: np.ndarray, Y: np.ndarray) -> int:
+    """``_first_minimum(_rigid_residuals(X, _cyclic_shifts(Y)))``, evaluated mostly in bulk.
+
+    All shifts are estimated at once (:func:`_shift_estimates`); only those
+    that can still be the first minimum (:func:`_shifts_to_fit`) are fitted
+    by :func:`_rigid_residuals`, so the returned shift is the one it picks.
+
+    Parameters
+    ----------
+    X, Y : ndarray, shape (s, 3)
+        Host and guest samples.
+
+    Returns
+    -------
+    int
+        The shift ``c`` (``np.roll(Y, -c, axis=0)``) chosen.
+    """
+    estimated = _shift_estimates(X, Y)
+    if estimated is None:
+        return _first_minimum(_rigid_residuals(X, _cyclic_shifts(Y)))
+    keep = _shifts_to_fit(*estimated)
+    return int(keep[_first_minimum(_rigid_residuals(X, _cyclic_shifts(Y, keep)))])
+
+
+def _shift_estimates(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The residual of every cyclic shift of ``Y`` fitted onto ``X``, and how far off it may be.
+
+    Every cyclic shift of ``Y`` has the same centroid and radius, so the
+    cross covariances of all shifts are one circular cross-correlation (FFT)
+    and the residuals follow from one batched SVD. They differ from
+    :func:`_rigid_residuals` by rounding, except that the determinant of a
+    nearly singular cross covariance may come out with the other sign, which
+    moves the trace by twice its smallest singular value and the residual by
+    twice that.
+
+    Parameters
+    ----------
+    X, Y : ndarray, shape (s, 3)
+        Host and guest samples.
+
+    Returns
+    -------
+    estimate : ndarray, shape (s,)
+        Residual of each shift ``c`` (``np.roll(Y, -c, axis=0)``).
+    spread : ndarray, shape (s,)
+        Bound on the difference from :func:`_rigid_residuals`.
+    or None
+        If an estimate is not finite.
+    """
+    s = len(Y)
+    Xc = X - X.mean(axis=0)
+    Xc = Xc / max(np.sqrt((Xc**2).sum() / s), 1e-300)
+    Yc = Y - Y.mean(axis=0)
+    Yc = Yc / max(np.sqrt((Yc**2).sum() / s), 1e-300)
+    # H[c, i, j] = sum_t Yc[(t + c) % s, i] * Xc[t, j], a circular cross-correlation
+    spec = np.fft.rfft(Yc, axis=0)[:, :, None] * np.conj(np.fft.rfft(Xc, axis=0))[:, None, :]
+    H = np.fft.irfft(spec, n=s, axis=0)
+    sv = np.linalg.svd(H, compute_uv=False)
+    det = np.linalg.det(H)
+    trace = sv[:, 0] + sv[:, 1] + np.sign(det) * sv[:, 2]
+    estimate = (Xc**2).sum() + (Yc**2).sum() - 2.0 * trace
+    if not np.isfinite(estimate).all():
+        return None
+    # a determinant this small against the largest singular value cubed may have either sign
+    unsure = np.abs(det) <= 1e-10 * sv[:, 0] ** 3
+    # 1e-7 relative: rounding differences are near 1e-13 here (|residual| <= 4 s), far less
+    spread = 1e-7 * np.maximum(np.abs(estimate), 1.0) + 4.0 * sv[:, 2] * unsure
+    return estimate, spread
+
+
+def _shifts_to_fit(estimate: np.ndarray, spread: np.ndarray) -> np.ndarray:
+    """The candidates that can still be :func:`_first_minimum` of the exact values.
+
+    Parameters
+    ----------
+    estimate, spread : ndarray, shape (c,)
+        Each exact value lies within ``estimate ± spread``.
+
+    Returns
+    -------
+    ndarray of int64, shape (k,)
+        Ascending indices of every candidate whose value may be the minimum
+        or within :func:`_first_minimum`'s tie band above it.
+    """
+    # the minimum exact value lies between ``floor`` and ``reach``
+    reach = float((estimate + spread).min())
+    floor = float((estimate - spread).min())
+    # _first_minimum's tie band is 1e-9 relative to that minimum; 1e-8 covers it
+    band = 1e-8 * max(abs(reach), abs(floor), 1.0)
+    return np.flatnonzero(estimate - spread <= reach + band)
+
+
+def _resample_shifted(P: np.ndarray, shifts: np.ndarray, n: int) -> np.ndarray:
+    """Resamplings of a closed polyline started at several of its vertices.
+
+    ``out[c]`` equals ``_resample(P[np.roll(np.arange(k), -shifts[c])], True, n)``
+    value for value: each shift repeats that function's arithmetic in the
+    same order, for all shifts at once.
+
+    Parameters
+    ----------
+    P : ndarray, shape (k, 3)
+        Closed polyline vertices.
+    shifts : ndarray of int, shape (c,)
+        Start vertex of each resampling, in ``[0, k)``.
+    n : int
+        Samples per resampling.
+
+    Returns
+    -------
+    ndarray, shape (c, n, 3)
+    """
+    k = len(P)
+    shifts = np.asarray(shifts, dtype=np.int64)
+    c = shifts.size
+    walk = (shifts[:, None] + np.arange(k)[None, :]) % k  # (c, k) vertex of each position
+    seg = _segment_lengths(P, True)[walk]
+    cum = np.concatenate([np.zeros((c, 1)), np.cumsum(seg, axis=1)], axis=1)
+    if not (cum[:, -1] > 0).all():
+        return np.stack([_resample(P[row], True, n) for row in walk])
+    ends = np.concatenate([cum[:, :k] / cum[:, -1:], np.ones((c, 1))], axis=1)  # (c, k + 1)
+    q = np.arange(n) / n
+    # searchsorted(ends[r], q, "right") counts the ends <= q[j]; an end e is <= q[j]
+    # exactly when j >= searchsorted(q, e, "left"), so the counts are running sums
+    first = np.searchsorted(q, ends.reshape(-1), side="left").reshape(c, k + 1)
+    hits = np.bincount((first + (n + 1) * np.arange(c)[:, None]).reshape(-1), minlength=c * (n + 1))
+    count = np.cumsum(hits.reshape(c, n + 1), axis=1)[:, :n]
+    at = np.clip(count - 1, 0, k - 1)
+    t0 = np.take_along_axis(ends, at, axis=1)
+    t1 = np.take_along_axis(ends, at + 1, axis=1)
+    span = np.where(t1 > t0, t1 - t0, 1.0)
+    frac = np.clip((q - t0) / span, 0.0, 1.0)
+    here = np.take_along_axis(walk, at, axis=1)
+    ahead = np.take_along_axis(walk, (at + 1) % k, axis=1)
+    return P[here] * (1.0 - frac)[:, :, None] + P[ahead] * frac[:, :, None]
 
 
 def _first_minimum(values: np.ndarray) -> int:
@@ -308,7 +462,7 @@ def pair_seams(
     guest = [g for _, g, _ in paired]
     # closed free curves: every cyclic roll of one resampling is a candidate start
     base = {i: _resample(Vg[guest[i].indices], True, _FIT_SAMPLES) for i in free}
-    rolls = {i: np.stack([np.roll(base[i], -j, axis=0) for j in range(_FIT_SAMPLES)]) for i in free}
+    rolls = {i: _cyclic_shifts(base[i]) for i in free}
     current = [_resample(Vg[g.indices], g.closed, _FIT_SAMPLES) for g in guest]
     for _ in range(rounds if free else 0):
         R, t = rigid_fit(np.vstack(current), np.vstack(X))
@@ -321,14 +475,12 @@ def pair_seams(
             k = len(g.indices)
             near = int(np.argmin(np.abs(((tv - coarse / _FIT_SAMPLES) + 0.5) % 1.0 - 0.5)))
             shifts = (near + np.arange(-3, 4)) % k
-            cand = np.stack(
-                [_resample(Vg[np.roll(g.indices, -j)], True, _FIT_SAMPLES) for j in shifts]
-            )
+            cand = _resample_shifted(Vg[g.indices], shifts, _FIT_SAMPLES)
             j = int(shifts[_first_minimum(_fit_residual(X[i], cand, R, t))])
             if j:
                 guest[i] = g.rolled(j)
                 base[i] = _resample(Vg[guest[i].indices], True, _FIT_SAMPLES)
-                rolls[i] = np.stack([np.roll(base[i], -r, axis=0) for r in range(_FIT_SAMPLES)])
+                rolls[i] = _cyclic_shifts(base[i])
                 current[i] = base[i]
                 changed = True
         if not changed:
@@ -497,8 +649,85 @@ def split_boundary_faces(F, a, b, frac, n0):
     he_sorted = he[grp]
     starts = np.flatnonzero(np.r_[True, he_sorted[1:] != he_sorted[:-1]])
     stops = np.r_[starts[1:], len(grp)]
-    # faces are replaced one split edge at a time; a face with two split edges
-    # is split again inside the fan made for the first (seam-sized loop)
+    fans = _fans_of_single_splits(F, grp, he_sorted, starts, stops, n0)
+    if fans is None:
+        fans = _fans_split_in_turn(F, grp, he_sorted, starts, stops, n0)
+    touched, new_F, new_parent = fans
+    keep = np.ones(m, dtype=bool)
+    keep[touched] = False
+    return np.vstack([F[keep], new_F]), np.concatenate([parent[keep], new_parent])
+
+
+def _fans_of_single_splits(F, grp, he_sorted, starts, stops, n0):
+    """The fans of :func:`split_boundary_faces` when each split face has one split edge.
+
+    Builds the same triangles in the same order as :func:`_fans_split_in_turn`
+    (one fan per split half-edge, in half-edge order, each running along the
+    edge), without a loop over the faces.
+
+    Parameters
+    ----------
+    F : ndarray of int64, shape (m, 3)
+    grp : ndarray of int64, shape (k,)
+        Inserted vertices (offsets from ``n0``) grouped by half-edge, ordered along it.
+    he_sorted : ndarray of int64, shape (k,)
+        Half-edge ``3 f + e`` split by each of them.
+    starts, stops : ndarray of int64, shape (g,)
+        Each half-edge's run in ``grp``.
+    n0 : int
+
+    Returns
+    -------
+    touched : ndarray of int64, shape (g,)
+        Split faces, ascending.
+    new_F : ndarray of int64, shape (k + g, 3)
+    new_parent : ndarray of int64, shape (k + g,)
+    or None
+        When a face has two split edges, repeats a vertex, or shares a
+        directed edge with another split face (the faces are then split in
+        turn, where one split may land in another's fan).
+    """
+    face, edge = np.divmod(he_sorted[starts], 3)
+    tri = F[face].astype(np.int64)
+    if (np.diff(face) <= 0).any():
+        return None
+    if ((tri[:, 0] == tri[:, 1]) | (tri[:, 1] == tri[:, 2]) | (tri[:, 2] == tri[:, 0])).any():
+        return None
+    n = int(tri.max()) + 1
+    directed = np.sort((tri * n + tri[:, [1, 2, 0]]).reshape(-1))
+    if (directed[1:] == directed[:-1]).any():
+        return None
+    g = face.size
+    rows = np.arange(g)
+    u = tri[rows, edge]
+    v = tri[rows, (edge + 1) % 3]
+    w = tri[rows, (edge + 2) % 3]
+    count = stops - starts
+    # fan j takes rows starts[j] + j .. stops[j] + j: (u, x1, w), (x1, x2, w), ..., (xc, v, w)
+    first = starts + rows
+    last = stops + rows
+    total = len(grp) + g
+    p = np.empty(total, dtype=np.int64)
+    q = np.empty(total, dtype=np.int64)
+    inner_p = np.ones(total, dtype=bool)
+    inner_p[first] = False
+    inner_q = np.ones(total, dtype=bool)
+    inner_q[last] = False
+    p[first] = u
+    p[inner_p] = n0 + grp
+    q[last] = v
+    q[inner_q] = n0 + grp
+    new_F = np.stack([p, q, np.repeat(w, count + 1)], axis=1)
+    return face, new_F, np.repeat(face, count + 1)
+
+
+def _fans_split_in_turn(F, grp, he_sorted, starts, stops, n0):
+    """The fans of :func:`split_boundary_faces`, one split half-edge after the other.
+
+    Parameters and returns as :func:`_fans_of_single_splits` (never ``None``).
+    A face with two split edges is split again inside the fan made for the
+    first (seam-sized loop).
+    """
     faces: dict[int, tuple[int, int, int]] = {}
     face_parent: dict[int, int] = {}
     owner: dict[tuple[int, int], int] = {}
@@ -526,8 +755,6 @@ def split_boundary_faces(F, a, b, frac, n0):
         chain = [u, *(n0 + grp[s0:s1]).tolist(), v]
         for p, q in zip(chain[:-1], chain[1:]):
             add((p, q, w), par)
-    keep = np.ones(m, dtype=bool)
-    keep[touched] = False
     new_F = np.array(list(faces.values()), dtype=np.int64).reshape(-1, 3)
     new_parent = np.array(list(face_parent.values()), dtype=np.int64)
-    return np.vstack([F[keep], new_F]), np.concatenate([parent[keep], new_parent])
+    return touched, new_F, new_parent

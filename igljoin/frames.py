@@ -21,7 +21,16 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-__all__ = ["SeamFrames", "face_normals_areas", "seam_frames", "vertex_face_matrix", "unit"]
+__all__ = [
+    "SeamFrames",
+    "face_normals_areas",
+    "face_areas",
+    "face_cross_products",
+    "faces_at",
+    "seam_frames",
+    "vertex_face_matrix",
+    "unit",
+]
 
 
 @dataclass(frozen=True)
@@ -50,10 +59,74 @@ def unit(X: np.ndarray) -> np.ndarray:
 
 
 def face_normals_areas(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit face normals, shape (m, 3), and areas, shape (m,); zero-area faces get zero normals."""
-    c = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    a = np.linalg.norm(c, axis=1)
-    return c / np.where(a > 0, a, 1.0)[:, None], 0.5 * a
+    """Unit face normals and areas.
+
+    Parameters
+    ----------
+    V : ndarray, shape (n, 3)
+    F : ndarray of int, shape (m, 3)
+
+    Returns
+    -------
+    normals : ndarray, shape (m, 3)
+        ``c = (V[F[:, 1]] − V[F[:, 0]]) × (V[F[:, 2]] − V[F[:, 0]])`` over
+        ``|c|``; zero-area faces get zero normals.
+    areas : ndarray, shape (m,)
+        ``|c| / 2``.
+
+    Notes
+    -----
+    Computed coordinate by coordinate on contiguous arrays of shape (m,)
+    with the operations, in the order, of ``np.cross`` (each component one
+    rounded product minus another) and ``np.linalg.norm(c, axis=1)`` (the
+    squares summed left to right), so the values are those of that
+    row-wise formulation, to the last bit.
+    """
+    c = face_cross_products(V, F)
+    length = _lengths(c)
+    normals = c / np.where(length > 0, length, 1.0)
+    return np.ascontiguousarray(normals.T), 0.5 * length
+
+
+def face_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Face areas, shape (m,): the second output of :func:`face_normals_areas` alone."""
+    return 0.5 * _lengths(face_cross_products(V, F))
+
+
+def _lengths(c: np.ndarray) -> np.ndarray:
+    """Length of each column of ``c`` (shape (3, m) -> (m,)), squares summed left to right."""
+    if not np.issubdtype(c.dtype, np.inexact):
+        c = c.astype(np.float64)  # as np.linalg.norm converts integer input
+    sq = c * c
+    return np.sqrt((sq[0] + sq[1]) + sq[2])
+
+
+def face_cross_products(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Edge cross product of each face, coordinate-major.
+
+    Parameters
+    ----------
+    V : ndarray, shape (n, 3)
+    F : ndarray of int, shape (m, 3)
+
+    Returns
+    -------
+    ndarray, shape (3, m)
+        Row ``i`` is coordinate ``i`` of
+        ``(V[F[:, 1]] − V[F[:, 0]]) × (V[F[:, 2]] − V[F[:, 0]])``: twice the
+        area times the unit normal, rounded as ``np.cross`` rounds it (in
+        the dtype of ``V``).
+    """
+    VT = np.ascontiguousarray(np.asarray(V).T)  # (3, n)
+    FT = np.ascontiguousarray(np.asarray(F).T)  # (3, m)
+    p0 = np.take(VT, FT[0], axis=1)  # (3, m) corner positions
+    a = np.take(VT, FT[1], axis=1) - p0
+    b = np.take(VT, FT[2], axis=1) - p0
+    c = np.empty_like(a)
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        np.multiply(a[j], b[k], out=c[i])
+        c[i] -= a[k] * b[j]
+    return c
 
 
 def vertex_face_matrix(F: np.ndarray, n: int) -> sp.csr_matrix:
@@ -62,6 +135,81 @@ def vertex_face_matrix(F: np.ndarray, n: int) -> sp.csr_matrix:
     return sp.csr_matrix(
         (np.ones(3 * m), (F.reshape(-1), np.repeat(np.arange(m), 3))), shape=(n, m)
     )
+
+
+def _curve_face_weights(
+    F: np.ndarray, curve: np.ndarray, n: int, areas: np.ndarray
+) -> sp.csr_matrix:
+    """The face areas at each curve vertex, as ``vertex_face_matrix(F, n)[curve] ⊙ areas``.
+
+    Built directly in CSR form: the same matrix (rows in curve order, each
+    row's faces ascending, explicit zeros kept), so that products with it
+    add the same terms in the same order, without the sparse row selection
+    and element-wise product.
+
+    Parameters
+    ----------
+    F : ndarray of int, shape (m, 3)
+    curve : ndarray of int, shape (k,)
+    n : int
+        Number of vertices.
+    areas : ndarray, shape (m,)
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (k, m)
+        Entry ``(i, f)`` is ``areas[f]`` where face ``f`` uses ``curve[i]``.
+    """
+    m = len(F)
+    corner_vertex = np.asarray(F, dtype=np.int64).reshape(-1)
+    if (
+        m
+        and (
+            (corner_vertex[0::3] == corner_vertex[1::3])
+            | (corner_vertex[1::3] == corner_vertex[2::3])
+            | (corner_vertex[2::3] == corner_vertex[0::3])
+        ).any()
+    ):  # a face repeating a vertex sums two entries: leave it to scipy
+        return vertex_face_matrix(F, n)[curve].multiply(areas[None, :]).tocsr()
+    order = np.argsort(corner_vertex, kind="stable")  # by vertex, faces ascending within
+    faces = order // 3
+    per_vertex = np.bincount(corner_vertex, minlength=n)
+    first = np.cumsum(per_vertex) - per_vertex
+    counts = per_vertex[curve]
+    indptr = np.zeros(len(curve) + 1, dtype=np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    # entries of row i: faces[first[curve[i]] : first[curve[i]] + counts[i]]
+    at = np.repeat(first[curve] - indptr[:-1], counts) + np.arange(indptr[-1])
+    indices = faces[at]
+    index_dtype = (
+        np.int32 if max(m, len(curve), int(indptr[-1])) <= np.iinfo(np.int32).max else np.int64
+    )
+    return sp.csr_matrix(
+        (1.0 * areas[indices], indices.astype(index_dtype), indptr.astype(index_dtype)),
+        shape=(len(curve), m),
+    )
+
+
+def faces_at(F: np.ndarray, vertices: np.ndarray, n: int) -> np.ndarray:
+    """The faces that use at least one of ``vertices``, in their order.
+
+    Parameters
+    ----------
+    F : ndarray of int, shape (m, 3)
+    vertices : ndarray of int, shape (k,)
+    n : int
+        Number of vertices (greater than every index in ``F`` and ``vertices``).
+
+    Returns
+    -------
+    ndarray of int, shape (m', 3)
+        The rows of ``F`` that hold one of ``vertices``.
+    """
+    F = np.asarray(F)
+    mark = np.zeros(n, dtype=bool)
+    mark[np.asarray(vertices).reshape(-1)] = True
+    FT = np.ascontiguousarray(F.T)
+    return F[mark[FT[0]] | mark[FT[1]] | mark[FT[2]]]
 
 
 def _curve_tangents(P: np.ndarray, closed: bool, span: int) -> np.ndarray:
@@ -102,8 +250,11 @@ def seam_frames(
     SeamFrames
     """
     P = V[curve] if curve_points is None else curve_points
+    # only the faces at the curve enter the frames; keeping them in their
+    # order keeps every sum below in the same order as over all faces
+    F = faces_at(F, curve, len(V))
     normals, areas = face_normals_areas(V, F)
-    W = vertex_face_matrix(F, len(V))[curve].multiply(areas[None, :]).tocsr()
+    W = _curve_face_weights(F, np.asarray(curve), len(V), areas)
     n = unit(W @ normals)
     span = 1
     if radius is not None and radius > 0:

@@ -23,8 +23,9 @@ import igl
 import numpy as np
 import scipy.sparse as sp
 
+from . import kernels
 from .frames import SeamFrames, face_normals_areas, unit, vertex_face_matrix
-from .rotations import fit_rotations
+from .rotations import fit_rotations, fit_rotations_igl
 
 #: Weight ``μ`` of the one-ring edges in the rotation-aware shape term, relative to
 #: the Laplacian. Small: it only fixes the rotations and makes them exact minimisers.
@@ -48,24 +49,21 @@ class LocalState:
     Attributes
     ----------
     X : ndarray, shape (n, 3)
-        The iterate.
+        The iterate (C-contiguous float64).
     rotations : ndarray, shape (n, 3, 3), optional
         Per-vertex rotations fitted at ``X`` (set by the rotation-aware shape term).
     cache : dict
         Products such as ``K X`` computed once per local step.
-    hint : ndarray, shape (3, 3, n), optional
-        Rotations of a nearby iterate (the previous local step's) to start the
-        rotation fit from; they change only how fast it converges.
+    hint : ndarray, shape (n, 3, 3), optional
+        Rotations of a nearby iterate (the previous local step's
+        ``rotations``) to start the rotation fit from; they change only how
+        fast it converges.
     """
 
     X: np.ndarray
     rotations: np.ndarray | None = None
     cache: dict = field(default_factory=dict)
     hint: np.ndarray | None = None
-
-    def rotations_soa(self) -> np.ndarray | None:
-        """The fitted rotations in structure-of-arrays layout, shape (3, 3, n), if any."""
-        return self.cache.get("R")
 
 
 class Term(ABC):
@@ -79,6 +77,12 @@ class Term(ABC):
     name: str
     K: sp.csr_matrix
     weights: np.ndarray
+
+    #: Factor of this term's ``Kᵀ W K`` in the quasi-Newton preconditioner
+    #: (:class:`igljoin.solve.LocalGlobalSolver`). 1 for a term whose Hessian
+    #: is ``Kᵀ W K`` everywhere; smaller for a term whose target is a
+    #: projection and so is stiff in only some directions.
+    preconditioner_scale: float = 1.0
 
     @abstractmethod
     def target(self, state: LocalState) -> np.ndarray:
@@ -132,7 +136,7 @@ def _edge_vectors(state: LocalState, E: np.ndarray, D: sp.csr_matrix) -> np.ndar
     """``X[E[:, 0]] − X[E[:, 1]]``, shape (e, 3), shared by the terms using the same ``E``."""
     key = ("edges", id(E))
     if key not in state.cache:
-        state.cache[key] = D @ state.X
+        state.cache[key] = kernels.edge_vectors(state.X, E) if kernels.ENABLED else D @ state.X
     return state.cache[key]
 
 
@@ -243,6 +247,7 @@ class ShapeTerm(Term):
         self.delta = self.L @ V0
         self.rotation_aware = rotation_aware
         self._K = None
+        self.compiled = False
         if not rotation_aware:
             self._K = self.L
             self.weights = np.full(n, self.weight)
@@ -257,14 +262,35 @@ class ShapeTerm(Term):
         # structure-of-arrays copies for the vectorised local step
         self._deltaT = np.ascontiguousarray(self.delta.T)
         self._e0T = np.ascontiguousarray(self.rest_edges.T)
-        # covariance operator: (M X)[a*n + v, b] = μ Σ_{edges e at v} e0[e, a] (X_i − X_j)[e, b],
-        # the one-ring part of the covariance A_v[b, a] of vertex v
-        incidence = sp.csr_matrix(
-            (np.ones(2 * ne), (self.E.reshape(-1), np.repeat(np.arange(ne), 2))), shape=(n, ne)
-        )
-        self.covariance = mu * sp.vstack(
-            [incidence @ sp.diags(self.rest_edges[:, a]) @ self.D for a in range(3)], format="csr"
-        )
+        self._covariance = None
+        # arrays of the compiled local step (igljoin.kernels)
+        self.compiled = kernels.ENABLED
+        if self.compiled:
+            self._Lp = self.L.indptr.astype(np.int64)
+            self._Li = self.L.indices.astype(np.int64)
+            self._Lx = np.ascontiguousarray(self.L.data, dtype=np.float64)
+            self._inc_ptr, self._inc_edges = kernels.incidence(self.E, n)
+            self._delta_c = np.ascontiguousarray(self.delta, dtype=np.float64)
+            self._rest_c = np.ascontiguousarray(self.rest_edges, dtype=np.float64)
+
+    @property
+    def covariance(self) -> sp.csr_matrix:
+        """Covariance operator ``M`` (3n × n) of the numpy local step, built on first use.
+
+        ``(M X)[a n + v, b] = μ Σ_{edges e at v} e0[e, a] (X_i − X_j)[e, b]``:
+        the one-ring part of the covariance ``A_v[b, a]`` of vertex ``v``.
+        """
+        if self._covariance is None:
+            n, ne = self.n, len(self.E)
+            incidence = sp.csr_matrix(
+                (np.ones(2 * ne), (self.E.reshape(-1), np.repeat(np.arange(ne), 2))),
+                shape=(n, ne),
+            )
+            self._covariance = ROTATION_REGULARISATION * sp.vstack(
+                [incidence @ sp.diags(self.rest_edges[:, a]) @ self.D for a in range(3)],
+                format="csr",
+            )
+        return self._covariance
 
     @property
     def K(self) -> sp.csr_matrix:
@@ -304,9 +330,11 @@ class ShapeTerm(Term):
         X : ndarray, shape (n, 3)
         LX : ndarray, shape (n, 3)
             ``L X``.
-        hint : ndarray, shape (3, 3, n), optional
+        hint : ndarray, shape (n, 3, 3), optional
             Starting rotations (see :func:`igljoin.rotations.fit_rotations`).
         """
+        if hint is not None:
+            hint = np.ascontiguousarray(hint.transpose(1, 2, 0))
         R = fit_rotations(self.covariances(X, LX), hint)
         return R.transpose(2, 0, 1)
 
@@ -316,9 +344,16 @@ class ShapeTerm(Term):
         if "LX" not in cache:
             cache["LX"] = self.L @ state.X
         if "R" not in cache:
-            R = fit_rotations(self.covariances(state.X, cache["LX"]), state.hint)
+            if state.rotations is not None:
+                # fitted already (by the compiled local step)
+                R = np.ascontiguousarray(state.rotations.transpose(1, 2, 0))
+            else:
+                hint = state.hint
+                if hint is not None:
+                    hint = np.ascontiguousarray(hint.transpose(1, 2, 0))
+                R = fit_rotations(self.covariances(state.X, cache["LX"]), hint)
+                state.rotations = R.transpose(2, 0, 1)
             cache["R"] = R
-            state.rotations = R.transpose(2, 0, 1)
         return cache["LX"], cache["R"]
 
     def _rotated(self, state: LocalState):
@@ -352,6 +387,8 @@ class ShapeTerm(Term):
                 LX = state.cache["LX"] = self.L @ state.X
             r = LX - self.delta
             return w * float(np.einsum("ij,ij->", r, r)), w * (self.Lt @ r)
+        if self.compiled and state.rotations is None:
+            return self._local_compiled(state)
         LX, _ = self._fit(state)
         Rd, a0, a1 = self._rotated(state)
         dT = _edge_vectors(state, self.E, self.D).T
@@ -367,6 +404,41 @@ class ShapeTerm(Term):
         grad += mu * (self.Dt @ r0.T)
         grad *= w
         return w * float(e), grad
+
+    def _local_compiled(self, state: LocalState) -> tuple[float, np.ndarray]:
+        """:meth:`local` by the compiled kernels; sets ``state.rotations``.
+
+        Vertices where the warm-started Newton fit does not settle get their
+        rotation from libigl's SVD fit, as in :func:`igljoin.rotations.fit_rotations`.
+        """
+        n = self.n
+        d = _edge_vectors(state, self.E, self.D)
+        hint = state.hint
+        if hint is None or hint.shape != (n, 3, 3):
+            hint = _NO_ROTATIONS
+        LX = np.empty((n, 3))
+        A = np.empty((n, 3, 3))
+        R = np.empty((n, 3, 3))
+        failed_mask = kernels.shape_rotations(
+            state.X, d, self._Lp, self._Li, self._Lx, self._delta_c, self._rest_c,
+            self._inc_ptr, self._inc_edges, ROTATION_REGULARISATION,
+            np.ascontiguousarray(hint, dtype=np.float64), LX, A, R,
+        )  # fmt: skip
+        failed = np.flatnonzero(failed_mask)
+        if failed.size:
+            R[failed] = fit_rotations_igl(A[failed].transpose(1, 2, 0)).transpose(2, 0, 1)
+        G = np.zeros((n, 3))
+        e = kernels.shape_residuals(
+            LX, d, self._Lp, self._Li, self._Lx, self._delta_c, self.E, self._rest_c,
+            ROTATION_REGULARISATION, self.weight, R, G,
+        )  # fmt: skip
+        state.rotations = R
+        state.cache["LX"] = LX
+        return float(e), G
+
+
+#: Stand-in for "no rotations" in the compiled kernels, shape (0, 3, 3).
+_NO_ROTATIONS = np.zeros((0, 3, 3))
 
 
 class StretchTerm(Term):
@@ -384,13 +456,21 @@ class StretchTerm(Term):
 
     name = "stretch"
 
+    #: Its target lies on a sphere of rest length: stiff along the edge, free across it.
+    #: 0.2 (with the smooth join's 0.5) needed the fewest iterations on the paper's
+    #: samples of the values tried (0.1–0.5; docs/benchmarks.md).
+    preconditioner_scale = 0.2
+
     def __init__(self, V0, E, stiffness):
         self.E = E
         self.K = _difference_operator(E, len(V0))
         self.Kt = sp.csr_matrix(self.K.T)
         self.weights = np.asarray(stiffness, dtype=np.float64)
-        self.rest = self.K @ V0
+        self.rest = np.ascontiguousarray(self.K @ V0)
         self.rest_length = np.linalg.norm(self.rest, axis=1)
+        self.compiled = kernels.ENABLED
+        if self.compiled:
+            self.E = np.ascontiguousarray(E, dtype=np.int64)
 
     def applied(self, state: LocalState) -> np.ndarray:
         """Edge vectors ``D X``, shape (e, 3), shared with the shape term."""
@@ -418,6 +498,11 @@ class StretchTerm(Term):
     def local(self, state: LocalState) -> tuple[float, np.ndarray]:
         """Energy and half gradient ``Dᵀ diag(k) (D X − s)`` (see :meth:`Term.local`)."""
         d = self.applied(state)
+        if self.compiled:
+            G = np.zeros((state.X.shape[0], 3))
+            R = _NO_ROTATIONS if state.rotations is None else state.rotations
+            e = kernels.stretch_local(d, self.E, self.weights, self.rest_length, self.rest, R, G)
+            return float(e), G
         length = np.sqrt(np.einsum("ij,ij->i", d, d))
         if not (length > 1e-12 * np.maximum(self.rest_length, 1e-300)).all():
             r = d - self.target(state)
@@ -487,6 +572,28 @@ class SmoothJoinTerm(Term):
         self.weights = np.full(len(Ec), float(weight))
         rest_len = np.linalg.norm(V0[Ec[:, 1]] - V0[Ec[:, 0]], axis=1)
         self.fixed_target = self.outward * rest_len[:, None]
+        # the robust target is a projection onto a half-plane (stiff across it only);
+        # the paper's is fixed, so its Hessian is Kᵀ W K
+        self.preconditioner_scale = 1.0 if mode == "paper" else 0.5
+        self.compiled = kernels.ENABLED
+        if self.compiled:
+            self.pairs = np.ascontiguousarray(self.pairs, dtype=np.int64)
+            self.normal = np.ascontiguousarray(self.normal, dtype=np.float64)
+            self.outward = np.ascontiguousarray(self.outward, dtype=np.float64)
+            self._fixed_c = (
+                np.ascontiguousarray(self.fixed_target) if mode == "paper" else np.zeros((0, 3))
+            )
+
+    def local(self, state: LocalState) -> tuple[float, np.ndarray]:
+        """Energy and half gradient (see :meth:`Term.local`), compiled when available."""
+        if not self.compiled:
+            return super().local(state)
+        G = np.zeros((state.X.shape[0], 3))
+        e = kernels.smooth_local(
+            state.X, self.pairs, self.normal, self.outward, self.weights, self.tolerance,
+            self._fixed_c, G,
+        )  # fmt: skip
+        return float(e), G
 
     @staticmethod
     def _tangential_points(V0, F, seam, on_seam, Ec):

@@ -166,12 +166,18 @@ def _seam_parts(result: JoinResult) -> list[tuple]:
     ]
 
 
-def _directed_count(F: np.ndarray, u: np.ndarray, v: np.ndarray, n: int) -> np.ndarray:
-    """How many faces of ``F`` hold the directed edge ``u[i] -> v[i]``, shape (len(u),)."""
-    key = np.concatenate([F[:, 0] * n + F[:, 1], F[:, 1] * n + F[:, 2], F[:, 2] * n + F[:, 0]])
+def _directed_keys(F: np.ndarray, n: int) -> np.ndarray:
+    """Sorted keys ``u * n + v`` of the directed edges ``u -> v`` of faces ``F`` (m, 3) -> (3m,)."""
+    FT = np.ascontiguousarray(F.T)  # (3, m)
+    key = np.concatenate([FT[0] * n + FT[1], FT[1] * n + FT[2], FT[2] * n + FT[0]])
     key.sort()
+    return key
+
+
+def _directed_count(keys: np.ndarray, u: np.ndarray, v: np.ndarray, n: int) -> np.ndarray:
+    """How many of the sorted directed-edge ``keys`` are ``u[i] -> v[i]``, shape (len(u),)."""
     q = u * n + v
-    return np.searchsorted(key, q, side="right") - np.searchsorted(key, q, side="left")
+    return np.searchsorted(keys, q, side="right") - np.searchsorted(keys, q, side="left")
 
 
 def weld(result: JoinResult, *, check: bool = True) -> Welded:
@@ -290,18 +296,22 @@ def weld(result: JoinResult, *, check: bool = True) -> Welded:
         Fh2, parent = Fh.copy(), np.arange(len(Fh), dtype=np.int64)
     Fg2 = g2m[Fg]
 
-    # orientation: the two sides must use each seam edge in opposite directions
+    # orientation: the two sides must use each seam edge in opposite directions; only
+    # faces with a seam vertex can hold a seam edge
     n = len(V)
     mseams = [g2m[seam] for _, seam, *_ in parts]
+    all_seam = np.concatenate(mseams)
+    host_keys = _directed_keys(Fh2[metrics.ring_band(Fh2, all_seam, 1)], n)
+    guest_keys = _directed_keys(Fg2[metrics.ring_band(Fg2, all_seam, 1)], n)
     same, opposite = [], []
     for i, (mseam, (_, _, closed, *_)) in enumerate(zip(mseams, parts)):
         u = mseam if closed else mseam[:-1]
         v = np.roll(mseam, -1) if closed else mseam[1:]
         host_dir = np.sign(
-            _directed_count(Fh2, u, v, n).sum() - _directed_count(Fh2, v, u, n).sum()
+            _directed_count(host_keys, u, v, n).sum() - _directed_count(host_keys, v, u, n).sum()
         )
         guest_dir = np.sign(
-            _directed_count(Fg2, u, v, n).sum() - _directed_count(Fg2, v, u, n).sum()
+            _directed_count(guest_keys, u, v, n).sum() - _directed_count(guest_keys, v, u, n).sum()
         )
         if host_dir != 0 and host_dir == guest_dir:
             same.append(i)
@@ -385,6 +395,103 @@ def _offenders(welded: Welded, vertices: np.ndarray) -> str:
     )
 
 
+def _fans(F, n):
+    """Edge-manifoldness and, per vertex, whether its faces form one edge-connected fan.
+
+    The faces at a vertex ``v`` are linked when they share an edge (as
+    ``igl.is_vertex_manifold`` links them); faces that both hold ``v``
+    share an edge exactly when they share a second vertex. The vertex is
+    manifold when the links join all its faces (union-find per vertex).
+
+    Parameters
+    ----------
+    F : ndarray of int64, shape (m, 3)
+        Faces using every vertex ``0 .. n − 1``, none repeating a vertex.
+    n : int
+
+    Returns
+    -------
+    edge_manifold : bool
+        No edge has more than two faces (``igl.is_edge_manifold``).
+    vertex_manifold : ndarray of bool, shape (n,)
+        ``igl.is_vertex_manifold``.
+    """
+    m = F.shape[0]
+    # faces at each vertex, in CSR form
+    start = np.zeros(n + 1, dtype=np.int64)
+    for f in range(m):
+        for c in range(3):
+            start[F[f, c] + 1] += 1
+    for v in range(n):
+        start[v + 1] += start[v]
+    at = np.empty(3 * m, dtype=np.int64)
+    fill = start[:-1].copy()
+    for f in range(m):
+        for c in range(3):
+            at[fill[F[f, c]]] = f
+            fill[F[f, c]] += 1
+    edge_manifold = True
+    vertex_manifold = np.zeros(n, dtype=np.bool_)
+    parent = np.empty(3 * m, dtype=np.int64)  # union-find over the faces at one vertex
+    seen = np.full(n, -1, dtype=np.int64)  # slot of a face at the vertex holding each vertex
+    count = np.zeros(n, dtype=np.int64)  # faces at the vertex holding each vertex
+    for v in range(n):
+        lo, hi = start[v], start[v + 1]
+        for s in range(lo, hi):
+            parent[s] = s
+        for s in range(lo, hi):
+            f = at[s]
+            for c in range(3):
+                x = F[f, c]
+                if x == v:
+                    continue
+                count[x] += 1
+                if seen[x] < 0:
+                    seen[x] = s
+                    continue
+                a, b = s, seen[x]
+                while parent[a] != a:
+                    a = parent[a]
+                while parent[b] != b:
+                    b = parent[b]
+                parent[max(a, b)] = min(a, b)
+        roots = 0
+        for s in range(lo, hi):
+            if parent[s] == s:
+                roots += 1
+            f = at[s]
+            for c in range(3):
+                x = F[f, c]
+                if x != v:
+                    if count[x] > 2:
+                        edge_manifold = False
+                    count[x] = 0
+                    seen[x] = -1
+        vertex_manifold[v] = roots == 1
+    return edge_manifold, vertex_manifold
+
+
+def _manifold_checks(F: np.ndarray, n: int):
+    """:func:`_fans` of faces ``F`` (m, 3) on vertices ``0 .. n − 1``, or ``None``.
+
+    ``None`` without numba or when a face repeats a vertex (libigl then decides).
+    """
+    if _fans_compiled is None:
+        return None
+    FT = np.ascontiguousarray(F.T)
+    if ((FT[0] == FT[1]) | (FT[1] == FT[2]) | (FT[2] == FT[0])).any():
+        return None
+    return _fans_compiled(np.ascontiguousarray(F, dtype=np.int64), n)
+
+
+try:
+    import numba as _nb
+except ImportError:  # without numba libigl runs both manifold checks
+    _nb = None
+#: :func:`_fans` compiled by numba (cached on disk), or ``None`` without numba.
+_fans_compiled = None if _nb is None else _nb.njit(cache=True)(_fans)
+
+
 def check_welded(welded: Welded, *, full: bool = False) -> None:
     """Raise :class:`WeldError` unless the welded mesh is a clean oriented manifold.
 
@@ -412,7 +519,26 @@ def check_welded(welded: Welded, *, full: bool = False) -> None:
     V, F = welded.mesh.V, welded.mesh.F
     n = len(V)
     sub = F if full else F[metrics.ring_band(F, welded.seam, 1)]
-    manifold, _, E, _, BE = igl.is_edge_manifold(sub)
+    # both manifold checks are combinatorial: run them on the sub-mesh's own vertex ids
+    # (ascending, as np.unique numbers them), first by _fans (cheap), then, where it finds
+    # a problem or cannot run, by libigl for the message
+    in_sub = np.zeros(n, dtype=bool)
+    in_sub[sub.reshape(-1)] = True
+    ids = np.flatnonzero(in_sub)
+    lookup = np.zeros(n, dtype=np.int64)
+    lookup[ids] = np.arange(len(ids))
+    local = lookup[sub]
+    used = np.zeros(n, dtype=bool)
+    used[(F if full else welded.seam).reshape(-1)] = True
+    fans = _manifold_checks(local, len(ids))
+    edges_ok = fans is not None and fans[0]
+    vertices_ok = (
+        fans is not None and used[ids].sum() == used.sum() and bool(fans[1][used[ids]].all())
+    )
+    manifold = True
+    if not edges_ok:
+        manifold, _, E, _, BE = igl.is_edge_manifold(local)
+        E = ids[np.asarray(E, dtype=np.int64)]
     if not manifold:
         raise WeldError(
             f"weld: {int(np.sum(BE))} edges have more than two faces "
@@ -420,19 +546,18 @@ def check_welded(welded: Welded, *, full: bool = False) -> None:
             "edge there — refine the guest near the seam (igljoin.clean) or pick curves that "
             "do not cut corners"
         )
-    used = np.zeros(n, dtype=bool)
-    used[(F if full else welded.seam).reshape(-1)] = True
-    vm = np.zeros(n, dtype=bool)
-    vm[: int(sub.max()) + 1] = np.asarray(igl.is_vertex_manifold(sub), dtype=bool)
-    bad = np.flatnonzero(~vm & used)
+    bad = np.zeros(0, dtype=np.int64)
+    if not vertices_ok:
+        vm = np.zeros(n, dtype=bool)
+        vm[ids] = np.asarray(igl.is_vertex_manifold(local), dtype=bool).reshape(-1)
+        bad = np.flatnonzero(~vm & used)
     if bad.size:
         raise WeldError(
             f"weld: {bad.size} vertices join separate fans of faces {_offenders(welded, bad)}; "
             "host and guest touch there other than along the seam — check that the curves "
             "are the joined boundaries and that the guest curve is a whole loop or path"
         )
-    key = np.concatenate([F[:, 0] * n + F[:, 1], F[:, 1] * n + F[:, 2], F[:, 2] * n + F[:, 0]])
-    key.sort()
+    key = _directed_keys(F, n)
     dup = np.unique(key[1:][key[1:] == key[:-1]])
     if dup.size:
         raise WeldError(

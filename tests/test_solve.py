@@ -151,7 +151,7 @@ def test_local_step_rotations_match_libigl(tube):
     X = solver.initial_guess()
     LX = shape.L @ X
     hint = fit_rotations_igl(shape.covariances(X + 0.01, shape.L @ (X + 0.01)))
-    R = shape.rotations(X, LX, hint)
+    R = shape.rotations(X, LX, hint.transpose(2, 0, 1))
     # libigl on the stacked covariance in its own layout (S[a n + v, b] = A_v[b, a])
     S = shape.covariance @ X
     S += np.concatenate([shape.delta[:, [a]] * LX for a in range(3)])

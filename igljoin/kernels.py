@@ -1,0 +1,475 @@
+"""Compiled local steps of the energy terms (numba).
+
+Every iteration of the join evaluates, for the current positions, each
+term's energy and half-gradient (:meth:`igljoin.terms.Term.local`). In numpy
+that is a few dozen array passes, sparse products and gathers per step —
+about 2 ms on a paper-sized guest, most of the iteration. The functions here
+do the same work as one loop over vertices or edges each, compiled by numba
+(``cache=True``: compiled once per machine, then loaded from the cache).
+
+They are exact re-statements of the numpy local steps in
+:mod:`igljoin.terms` (which stay as the reference implementation; the tests
+compare both to rounding). Setting the environment variable
+``IGLJOIN_KERNELS=0`` before importing igljoin makes the terms use the numpy
+path instead.
+
+Layouts: positions ``X`` (n, 3); edges ``E`` (e, 2) with edge vectors
+``d_e = X[E[e, 0]] − X[E[e, 1]]``; rotations (n, 3, 3); half-gradients are
+*added* into a caller's (n, 3) array ``G``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numba as nb
+import numpy as np
+
+__all__ = [
+    "ENABLED",
+    "edge_vectors",
+    "shape_rotations",
+    "shape_residuals",
+    "stretch_local",
+    "smooth_local",
+    "incidence",
+    "lbfgs_first_loop",
+    "lbfgs_second_loop",
+]
+
+#: Whether the terms use these kernels (``IGLJOIN_KERNELS=0`` turns them off).
+ENABLED = os.environ.get("IGLJOIN_KERNELS", "1") != "0"
+
+# Newton on SO(3): same constants as igljoin.rotations (step below which a rotation
+# has settled, steps before the SVD decides, relative margin of the maximum condition)
+_STEP_TOLERANCE = 1e-7
+_MAX_STEPS = 8
+_DEGENERATE = 1e-9
+
+
+def incidence(E: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Edges incident to each vertex in CSR form.
+
+    Parameters
+    ----------
+    E : ndarray of int64, shape (e, 2)
+    n : int
+
+    Returns
+    -------
+    ptr : ndarray of int64, shape (n + 1,)
+    edges : ndarray of int64, shape (2 e,)
+        ``edges[ptr[v]:ptr[v + 1]]`` are the edges with ``v`` as an endpoint.
+    """
+    ends = E.reshape(-1)
+    order = np.argsort(ends, kind="stable")
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(ends, minlength=n), out=ptr[1:])
+    return ptr, (order // 2).astype(np.int64)
+
+
+@nb.njit(cache=True)
+def edge_vectors(X, E):  # pragma: no cover - compiled
+    """``X[E[:, 0]] − X[E[:, 1]]``, shape (e, 3)."""
+    ne = E.shape[0]
+    d = np.empty((ne, 3))
+    for k in range(ne):
+        i = E[k, 0]
+        j = E[k, 1]
+        d[k, 0] = X[i, 0] - X[j, 0]
+        d[k, 1] = X[i, 1] - X[j, 1]
+        d[k, 2] = X[i, 2] - X[j, 2]
+    return d
+
+
+@nb.njit(cache=True)
+def _newton_rotation(A, R):  # pragma: no cover - compiled
+    """Newton on SO(3) for ``max tr(Rᵀ A)`` from ``R`` (3 × 3, updated in place).
+
+    Returns whether it settled at a maximum (a local maximum of ``tr(Rᵀ A)``
+    on SO(3) is the global one); see igljoin.rotations._newton_step. Works on
+    scalars: small-array operations inside a per-vertex loop cost more than
+    the arithmetic.
+    """
+    a00, a01, a02 = A[0, 0], A[0, 1], A[0, 2]
+    a10, a11, a12 = A[1, 0], A[1, 1], A[1, 2]
+    a20, a21, a22 = A[2, 0], A[2, 1], A[2, 2]
+    r00, r01, r02 = R[0, 0], R[0, 1], R[0, 2]
+    r10, r11, r12 = R[1, 0], R[1, 1], R[1, 2]
+    r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
+    settled = False
+    for _ in range(_MAX_STEPS):
+        # M = Rᵀ A
+        m00 = r00 * a00 + r10 * a10 + r20 * a20
+        m01 = r00 * a01 + r10 * a11 + r20 * a21
+        m02 = r00 * a02 + r10 * a12 + r20 * a22
+        m10 = r01 * a00 + r11 * a10 + r21 * a20
+        m11 = r01 * a01 + r11 * a11 + r21 * a21
+        m12 = r01 * a02 + r11 * a12 + r21 * a22
+        m20 = r02 * a00 + r12 * a10 + r22 * a20
+        m21 = r02 * a01 + r12 * a11 + r22 * a21
+        m22 = r02 * a02 + r12 * a12 + r22 * a22
+        s0 = m12 - m21
+        s1 = m20 - m02
+        s2 = m01 - m10
+        tr = m00 + m11 + m22
+        a = tr - m00
+        d = tr - m11
+        f = tr - m22
+        b = -0.5 * (m01 + m10)
+        c = -0.5 * (m02 + m20)
+        e = -0.5 * (m12 + m21)
+        c00 = d * f - e * e
+        c01 = c * e - b * f
+        c02 = b * e - c * d
+        c11 = a * f - c * c
+        c12 = b * c - a * e
+        c22 = a * d - b * b
+        det = a * c00 + b * c01 + c * c02
+        scale = abs(a) + abs(d) + abs(f) + 1e-300
+        if not (
+            a > _DEGENERATE * scale
+            and c22 > _DEGENERATE * scale * scale
+            and det > _DEGENERATE * scale * scale * scale
+        ):
+            break
+        inv = -1.0 / det
+        w0 = (c00 * s0 + c01 * s1 + c02 * s2) * inv
+        w1 = (c01 * s0 + c11 * s1 + c12 * s2) * inv
+        w2 = (c02 * s0 + c12 * s1 + c22 * s2) * inv
+        theta = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        if not math.isfinite(theta):
+            break
+        # Cayley retraction of the half step (exactly orthogonal)
+        w0 *= 0.5
+        w1 *= 0.5
+        w2 *= 0.5
+        alpha = 2.0 / (1.0 + w0 * w0 + w1 * w1 + w2 * w2)
+        e00 = 1.0 - alpha * (w1 * w1 + w2 * w2)
+        e11 = 1.0 - alpha * (w0 * w0 + w2 * w2)
+        e22 = 1.0 - alpha * (w0 * w0 + w1 * w1)
+        p01 = alpha * w0 * w1
+        p02 = alpha * w0 * w2
+        p12 = alpha * w1 * w2
+        e01 = p01 - alpha * w2
+        e10 = p01 + alpha * w2
+        e02 = p02 + alpha * w1
+        e20 = p02 - alpha * w1
+        e12 = p12 - alpha * w0
+        e21 = p12 + alpha * w0
+        r00, r01, r02 = (
+            r00 * e00 + r01 * e10 + r02 * e20,
+            r00 * e01 + r01 * e11 + r02 * e21,
+            r00 * e02 + r01 * e12 + r02 * e22,
+        )
+        r10, r11, r12 = (
+            r10 * e00 + r11 * e10 + r12 * e20,
+            r10 * e01 + r11 * e11 + r12 * e21,
+            r10 * e02 + r11 * e12 + r12 * e22,
+        )
+        r20, r21, r22 = (
+            r20 * e00 + r21 * e10 + r22 * e20,
+            r20 * e01 + r21 * e11 + r22 * e21,
+            r20 * e02 + r21 * e12 + r22 * e22,
+        )
+        if theta <= _STEP_TOLERANCE:
+            settled = True
+            break
+    R[0, 0], R[0, 1], R[0, 2] = r00, r01, r02
+    R[1, 0], R[1, 1], R[1, 2] = r10, r11, r12
+    R[2, 0], R[2, 1], R[2, 2] = r20, r21, r22
+    return settled
+
+
+@nb.njit(cache=True)
+def shape_rotations(
+    X, d, Lp, Li, Lx, delta, rest_edges, inc_ptr, inc_edges, mu, hint, LX, A, R
+):  # pragma: no cover - compiled
+    """First half of the rotation-aware Laplacian term: covariances and rotations.
+
+    Parameters
+    ----------
+    X : ndarray, shape (n, 3)
+    d : ndarray, shape (e, 3)
+        Edge vectors at ``X``.
+    Lp, Li, Lx : ndarray
+        CSR arrays of the Laplacian ``L`` (n × n).
+    delta : ndarray, shape (n, 3)
+        Rest Laplacian coordinates ``L V0``.
+    rest_edges : ndarray, shape (e, 3)
+    inc_ptr, inc_edges : ndarray of int64
+        Edges incident to each vertex (:func:`incidence`).
+    mu : float
+        Weight of the one-ring edges.
+    hint : ndarray, shape (n, 3, 3) or (0, 3, 3)
+        Starting rotations (empty: each vertex starts from the previous
+        vertex's rotation, usually a neighbour's).
+    LX : ndarray, shape (n, 3)
+        Output: ``L X``.
+    A : ndarray, shape (n, 3, 3)
+        Output: covariances ``A_v = l(p′)_v δ_vᵀ + μ Σ_e d_e e0_eᵀ``.
+    R : ndarray, shape (n, 3, 3)
+        Output: rotations maximising ``tr(R_vᵀ A_v)`` where Newton settled.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        Vertices where Newton did not settle at a maximum; their rotations
+        are left to the caller (libigl's SVD fit).
+    """
+    n = X.shape[0]
+    for v in range(n):
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        for k in range(Lp[v], Lp[v + 1]):
+            j = Li[k]
+            a = Lx[k]
+            s0 += a * X[j, 0]
+            s1 += a * X[j, 1]
+            s2 += a * X[j, 2]
+        LX[v, 0] = s0
+        LX[v, 1] = s1
+        LX[v, 2] = s2
+    use_hint = hint.shape[0] == n
+    failed = np.zeros(n, dtype=np.bool_)
+    Rv = np.zeros((3, 3))
+    for b in range(3):
+        Rv[b, b] = 1.0
+    for v in range(n):
+        Av = A[v]
+        for b in range(3):
+            for a in range(3):
+                Av[b, a] = LX[v, b] * delta[v, a]
+        for k in range(inc_ptr[v], inc_ptr[v + 1]):
+            e = inc_edges[k]
+            for b in range(3):
+                db = mu * d[e, b]
+                for a in range(3):
+                    Av[b, a] += db * rest_edges[e, a]
+        if use_hint:
+            for b in range(3):
+                for a in range(3):
+                    Rv[b, a] = hint[v, b, a]
+        if _newton_rotation(Av, Rv):
+            for b in range(3):
+                for a in range(3):
+                    R[v, b, a] = Rv[b, a]
+        else:
+            failed[v] = True
+            for b in range(3):
+                for a in range(3):
+                    Rv[b, a] = 1.0 if a == b else 0.0
+    return failed
+
+
+@nb.njit(cache=True)
+def shape_residuals(LX, d, Lp, Li, Lx, delta, E, rest_edges, mu, w, R, G):  # pragma: no cover
+    """Second half of the rotation-aware Laplacian term: energy and half-gradient.
+
+    With the rotations ``R`` (n, 3, 3) fitted, returns the energy
+    ``w (Σ ‖l(p′)_v − R_v δ_v‖² + μ Σ_e (‖d_e − R_i e0‖² + ‖d_e − R_j e0‖²))``
+    and adds ``w (Lᵀ r + μ Dᵀ (r0 + r1))`` to ``G`` (n, 3). Other arguments as
+    in :func:`shape_rotations`; ``E`` (e, 2) are the edges.
+    """
+    n = LX.shape[0]
+    energy_lap = 0.0
+    for v in range(n):
+        x0 = delta[v, 0]
+        x1 = delta[v, 1]
+        x2 = delta[v, 2]
+        r0 = LX[v, 0] - (R[v, 0, 0] * x0 + R[v, 0, 1] * x1 + R[v, 0, 2] * x2)
+        r1 = LX[v, 1] - (R[v, 1, 0] * x0 + R[v, 1, 1] * x1 + R[v, 1, 2] * x2)
+        r2 = LX[v, 2] - (R[v, 2, 0] * x0 + R[v, 2, 1] * x1 + R[v, 2, 2] * x2)
+        energy_lap += r0 * r0 + r1 * r1 + r2 * r2
+        for k in range(Lp[v], Lp[v + 1]):
+            j = Li[k]
+            a = w * Lx[k]
+            G[j, 0] += a * r0
+            G[j, 1] += a * r1
+            G[j, 2] += a * r2
+    energy_edges = 0.0
+    wm = w * mu
+    for e in range(E.shape[0]):
+        i = E[e, 0]
+        j = E[e, 1]
+        x0 = rest_edges[e, 0]
+        x1 = rest_edges[e, 1]
+        x2 = rest_edges[e, 2]
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        for c in range(3):
+            ri = d[e, c] - (R[i, c, 0] * x0 + R[i, c, 1] * x1 + R[i, c, 2] * x2)
+            rj = d[e, c] - (R[j, c, 0] * x0 + R[j, c, 1] * x1 + R[j, c, 2] * x2)
+            energy_edges += ri * ri + rj * rj
+            if c == 0:
+                s0 = ri + rj
+            elif c == 1:
+                s1 = ri + rj
+            else:
+                s2 = ri + rj
+        G[i, 0] += wm * s0
+        G[i, 1] += wm * s1
+        G[i, 2] += wm * s2
+        G[j, 0] -= wm * s0
+        G[j, 1] -= wm * s1
+        G[j, 2] -= wm * s2
+    return w * (energy_lap + mu * energy_edges)
+
+
+@nb.njit(cache=True)
+def stretch_local(d, E, k, rest_length, rest, R, G):  # pragma: no cover - compiled
+    """Edge-length term ``Σ k (|d| − L0)²``: return the energy, add the half-gradient.
+
+    A collapsed edge (``|d| ≤ 1e-12 L0``) is pulled to its rest vector,
+    rotated by its first endpoint's rotation when ``R`` (n, 3, 3) is given
+    (an empty ``R`` leaves it unrotated).
+    """
+    rotated = R.shape[0] > 0
+    energy = 0.0
+    for e in range(E.shape[0]):
+        i = E[e, 0]
+        j = E[e, 1]
+        d0 = d[e, 0]
+        d1 = d[e, 1]
+        d2 = d[e, 2]
+        length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        if length > 1e-12 * max(rest_length[e], 1e-300):
+            gap = length - rest_length[e]
+            energy += k[e] * gap * gap
+            f = k[e] * gap / length
+            r0 = f * d0
+            r1 = f * d1
+            r2 = f * d2
+        else:
+            t0 = rest[e, 0]
+            t1 = rest[e, 1]
+            t2 = rest[e, 2]
+            if rotated:
+                t0 = R[i, 0, 0] * rest[e, 0] + R[i, 0, 1] * rest[e, 1] + R[i, 0, 2] * rest[e, 2]
+                t1 = R[i, 1, 0] * rest[e, 0] + R[i, 1, 1] * rest[e, 1] + R[i, 1, 2] * rest[e, 2]
+                t2 = R[i, 2, 0] * rest[e, 0] + R[i, 2, 1] * rest[e, 1] + R[i, 2, 2] * rest[e, 2]
+            r0 = d0 - t0
+            r1 = d1 - t1
+            r2 = d2 - t2
+            energy += k[e] * (r0 * r0 + r1 * r1 + r2 * r2)
+            r0 *= k[e]
+            r1 *= k[e]
+            r2 *= k[e]
+        G[i, 0] += r0
+        G[i, 1] += r1
+        G[i, 2] += r2
+        G[j, 0] -= r0
+        G[j, 1] -= r1
+        G[j, 2] -= r2
+    return energy
+
+
+@nb.njit(cache=True)
+def smooth_local(
+    X, pairs, normal, outward, weights, tolerance, fixed_target, G
+):  # pragma: no cover - compiled
+    """Smooth-join term over cross-seam edges: return the energy, add the half-gradient.
+
+    For each pair ``(s, f)`` the edge ``d = X[f] − X[s]`` is pulled to its
+    target: ``fixed_target[p]`` when that array is non-empty (the paper's
+    form), else the closest point of ``d`` in the half-plane continuing the
+    host (normal ``normal[p]``, outward direction ``outward[p]``), widened
+    to a wedge of half-angle ``tolerance`` radians when it is positive.
+    """
+    fixed = fixed_target.shape[0] > 0
+    ca = math.cos(tolerance)
+    sa = math.sin(tolerance)
+    ta = math.tan(tolerance)
+    energy = 0.0
+    for p in range(pairs.shape[0]):
+        s = pairs[p, 0]
+        f = pairs[p, 1]
+        d0 = X[f, 0] - X[s, 0]
+        d1 = X[f, 1] - X[s, 1]
+        d2 = X[f, 2] - X[s, 2]
+        if fixed:
+            t0 = fixed_target[p, 0]
+            t1 = fixed_target[p, 1]
+            t2 = fixed_target[p, 2]
+        else:
+            n0 = normal[p, 0]
+            n1 = normal[p, 1]
+            n2 = normal[p, 2]
+            z = d0 * n0 + d1 * n1 + d2 * n2
+            p0 = d0 - z * n0
+            p1 = d1 - z * n1
+            p2 = d2 - z * n2
+            o0 = outward[p, 0]
+            o1 = outward[p, 1]
+            o2 = outward[p, 2]
+            po = p0 * o0 + p1 * o1 + p2 * o2
+            if po < 0.0:
+                p0 -= po * o0
+                p1 -= po * o1
+                p2 -= po * o2
+            if tolerance == 0.0:
+                t0 = p0
+                t1 = p1
+                t2 = p2
+            else:
+                plen = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+                if abs(z) <= ta * plen:
+                    t0 = p0 + z * n0
+                    t1 = p1 + z * n1
+                    t2 = p2 + z * n2
+                else:
+                    sc = max(plen * ca + abs(z) * sa, 0.0)
+                    inv = 1.0 / plen if plen > 0.0 else 1.0
+                    sz = sa if z > 0.0 else (-sa if z < 0.0 else 0.0)
+                    t0 = sc * (ca * p0 * inv + sz * n0)
+                    t1 = sc * (ca * p1 * inv + sz * n1)
+                    t2 = sc * (ca * p2 * inv + sz * n2)
+        r0 = d0 - t0
+        r1 = d1 - t1
+        r2 = d2 - t2
+        wp = weights[p]
+        energy += wp * (r0 * r0 + r1 * r1 + r2 * r2)
+        G[f, 0] += wp * r0
+        G[f, 1] += wp * r1
+        G[f, 2] += wp * r2
+        G[s, 0] -= wp * r0
+        G[s, 1] -= wp * r1
+        G[s, 2] -= wp * r2
+    return energy
+
+
+@nb.njit(cache=True)
+def lbfgs_first_loop(q, S, Y, rho, order, alpha):  # pragma: no cover - compiled
+    """First half of the L-BFGS two-loop recursion, newest pair first.
+
+    ``q`` (N,) is updated in place to ``q − Σ α_k y_k``; ``S``, ``Y`` (m, N)
+    hold the pairs in the slots ``order`` (oldest first), ``rho`` (m,) their
+    ``1 / sᵀy``; ``alpha`` (m,) receives the coefficients by slot.
+    """
+    N = q.shape[0]
+    for k in range(order.shape[0] - 1, -1, -1):
+        slot = order[k]
+        a = 0.0
+        for i in range(N):
+            a += S[slot, i] * q[i]
+        a *= rho[slot]
+        alpha[slot] = a
+        for i in range(N):
+            q[i] -= a * Y[slot, i]
+
+
+@nb.njit(cache=True)
+def lbfgs_second_loop(z, S, Y, rho, order, alpha):  # pragma: no cover - compiled
+    """Second half of the two-loop recursion, oldest pair first (``z`` (N,) in place)."""
+    N = z.shape[0]
+    for k in range(order.shape[0]):
+        slot = order[k]
+        b = 0.0
+        for i in range(N):
+            b += Y[slot, i] * z[i]
+        c = alpha[slot] - rho[slot] * b
+        for i in range(N):
+            z[i] += c * S[slot, i]

@@ -1,0 +1,164 @@
+"""The compiled local steps (igljoin.kernels) equal the numpy reference path."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import igljoin
+from igljoin import kernels, phantoms
+from igljoin.rotations import fit_rotations_igl
+from igljoin.terms import LocalState, ShapeTerm, SmoothJoinTerm, StretchTerm
+
+pytestmark = pytest.mark.skipif(not kernels.ENABLED, reason="IGLJOIN_KERNELS=0")
+
+
+@pytest.fixture(scope="module")
+def tube():
+    """The paper's end-to-end sample at half resolution (about 600 guest vertices)."""
+    return phantoms.paper_sample("end_to_end", "longer", resolution=0.5)
+
+
+def _solver(s, **options):
+    return igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve, **options)
+
+
+def _both(term, X, hint=None, rotations=None):
+    """(energy, half-gradient, rotations) by the compiled and by the numpy path."""
+    out = []
+    for compiled in (True, False):
+        term.compiled = compiled
+        state = LocalState(np.ascontiguousarray(X), hint=hint, rotations=rotations)
+        e, g = term.local(state)
+        out.append((e, g, state.rotations))
+    term.compiled = True
+    return out
+
+
+def _perturbed(solver, scale, seed):
+    X = solver.initial_guess()
+    rng = np.random.default_rng(seed)
+    return X + scale * solver.guest_mean_edge * rng.normal(size=X.shape)
+
+
+# rounding only: the same sums in a different order; energies are sums of ~10^4
+# squares and gradients sums of a few dozen products, so 1e-12 / 1e-10 relative
+_E_REL = 1e-12
+_G_REL = 1e-10
+
+
+@pytest.mark.parametrize("with_hint", [False, True])
+def test_shape_kernel_equals_numpy(tube, with_hint):
+    solver = _solver(tube)
+    shape = solver.terms[0]
+    assert isinstance(shape, ShapeTerm) and shape.compiled
+    X = _perturbed(solver, 0.3, 1)
+    hint = None
+    if with_hint:
+        # rotations of a nearby iterate, as the iteration passes them
+        near = LocalState(_perturbed(solver, 0.3, 2))
+        shape.local(near)
+        hint = near.rotations
+    (ek, gk, Rk), (en, gn, Rn) = _both(shape, X, hint)
+    assert ek == pytest.approx(en, rel=_E_REL)
+    assert np.abs(gk - gn).max() <= _G_REL * np.abs(gn).max()
+    # both are the exact maximisers (libigl's SVD fit to rounding), see test_solve
+    assert np.abs(Rk - Rn).max() <= 1e-12
+
+
+def test_shape_kernel_rotations_are_libigls(tube):
+    solver = _solver(tube)
+    shape = solver.terms[0]
+    X = _perturbed(solver, 0.5, 3)
+    state = LocalState(X)
+    shape.local(state)
+    ref = fit_rotations_igl(shape.covariances(X, shape.L @ X)).transpose(2, 0, 1)
+    # 1e-12: Newton settles to rounding (see igljoin.rotations.STEP_TOLERANCE)
+    assert np.abs(state.rotations - ref).max() <= 1e-12
+    det = np.linalg.det(state.rotations)
+    # proper rotations to rounding
+    assert np.abs(det - 1.0).max() <= 1e-12
+
+
+def test_shape_kernel_survives_a_hint_half_a_turn_away(tube):
+    """A hint where Newton cannot settle (a saddle) falls back to the SVD."""
+    solver = _solver(tube)
+    shape = solver.terms[0]
+    X = _perturbed(solver, 0.2, 4)
+    flip = Rotation.from_rotvec([np.pi, 0.0, 0.0]).as_matrix()
+    state = LocalState(X)
+    shape.local(state)
+    hint = np.einsum("ij,njk->nik", flip, state.rotations)
+    (ek, gk, Rk), (en, gn, Rn) = _both(shape, X, hint)
+    # 1e-12: both end at libigl's global maximiser (see above)
+    assert np.abs(Rk - state.rotations).max() <= 1e-12
+    assert ek == pytest.approx(en, rel=_E_REL)
+
+
+def test_stretch_kernel_equals_numpy_with_a_collapsed_edge(tube):
+    solver = _solver(tube)
+    stretch = solver.terms[1]
+    assert isinstance(stretch, StretchTerm) and stretch.compiled
+    X = _perturbed(solver, 0.2, 5)
+    i, j = stretch.E[7]
+    X[j] = X[i]  # edge 7 has zero length: its target is the rotated rest edge
+    shape_state = LocalState(X)
+    solver.terms[0].local(shape_state)
+    for rotations in (None, shape_state.rotations):
+        (ek, gk, _), (en, gn, _) = _both(stretch, X, rotations=rotations)
+        assert ek == pytest.approx(en, rel=_E_REL)
+        assert np.abs(gk - gn).max() <= _G_REL * np.abs(gn).max()
+
+
+@pytest.mark.parametrize(
+    "options",
+    [{}, {"smooth_mode": "paper"}, {"smooth_tolerance": 5.0}],
+    ids=["robust", "paper", "wedge"],
+)
+def test_smooth_kernel_equals_numpy(tube, options):
+    solver = _solver(tube, **options)
+    smooth = solver.terms[2]
+    assert isinstance(smooth, SmoothJoinTerm) and smooth.compiled
+    # large perturbation: some edges fold back into the host, some leave the wedge
+    X = _perturbed(solver, 1.0, 6)
+    (ek, gk, _), (en, gn, _) = _both(smooth, X)
+    assert ek == pytest.approx(en, rel=_E_REL)
+    assert np.abs(gk - gn).max() <= _G_REL * np.abs(gn).max()
+
+
+def test_numpy_path_gives_the_same_join(tube):
+    """``IGLJOIN_KERNELS=0`` switches the kernels off; the join is the same."""
+    code = (
+        "import json, igljoin; from igljoin import kernels, phantoms\n"
+        "s = phantoms.paper_sample('end_to_end', 'longer', resolution=0.5)\n"
+        "r = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve)\n"
+        "print(json.dumps([kernels.ENABLED, r.iterations, r.energy[-1], r.guest.V.tolist()]))\n"
+    )
+    env = dict(os.environ, IGLJOIN_KERNELS="0")
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    enabled, iterations, energy, V = json.loads(out.stdout)
+    res = igljoin.join(tube.host, tube.guest, tube.host_curve, tube.guest_curve)
+    assert enabled is False
+    # both paths compute the same numbers up to summation order (~1e-13 relative per
+    # step); over a converging run that can shift the stopping iteration by a few
+    assert abs(iterations - res.iterations) <= 3
+    # and they stop at the same minimum: within the convergence tolerance (1e-7)
+    assert energy == pytest.approx(res.energy[-1], rel=1e-6)
+    size = float(np.linalg.norm(np.ptp(tube.guest.V, axis=0)))
+    # soft modes allow position differences of order sqrt(1e-7) of the size
+    assert np.abs(np.asarray(V) - res.guest.V).max() <= 1e-3 * size
+
+
+def test_incidence_lists_each_edge_at_both_ends():
+    E = np.array([[0, 1], [1, 2], [2, 0], [2, 3]])
+    ptr, edges = kernels.incidence(E, 5)
+    at = [sorted(edges[ptr[v] : ptr[v + 1]].tolist()) for v in range(5)]
+    assert at == [[0, 2], [0, 1], [1, 2, 3], [3], []]

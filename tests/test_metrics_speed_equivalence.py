@@ -1,0 +1,663 @@
+"""The fast paths of the metrics phase give exactly what the plain computations give.
+
+The metrics, the weld and its self-intersection count were sped up by
+computing on contiguous coordinate arrays, on the faces at a curve only, on
+cached host values, on candidate pairs instead of all pairs, with compiled
+manifold checks, and with a floating-point pre-check that keeps clean faces
+away from CGAL. Each test runs a fast path next to a reference computation
+(the plain code it replaced, kept below, or libigl / CGAL themselves) and
+compares. Tolerances are zero throughout: the fast paths perform the same
+floating-point operations in the same order (or select among identical
+values), so every float is compared bit for bit and every count exactly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import gc
+import importlib
+
+import igl
+import igl.copyleft.cgal as cgal
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import igljoin
+from igljoin import frames, metrics, phantoms
+from igljoin.correspond import rigid_fit
+from igljoin.mesh import Mesh
+
+weld_mod = importlib.import_module("igljoin.weld")
+
+PAPER = [
+    (sc, ln) for sc in ("end_to_end", "partial_patch") for ln in ("shorter", "equal", "longer")
+]
+
+
+@pytest.fixture(scope="module")
+def joins():
+    """The six paper samples, joined (at half resolution, to keep the module quick)."""
+    out = {}
+    for key in PAPER:
+        s = phantoms.paper_sample(*key, resolution=0.5)
+        out[key] = (s, igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve))
+    return out
+
+
+def _assert_same(a, b):
+    """Bit-for-bit equality of two arrays (same shape and dtype; NaN equals NaN)."""
+    a, b = np.asarray(a), np.asarray(b)
+    assert a.shape == b.shape and a.dtype == b.dtype
+    assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f")
+
+
+# -- reference computations (the code the fast paths replaced) --------------------------------
+
+
+def _ref_face_normals_areas(V, F):
+    c = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    a = np.linalg.norm(c, axis=1)
+    return c / np.where(a > 0, a, 1.0)[:, None], 0.5 * a
+
+
+def _ref_ring_band(F, vertices, rings):
+    mark = np.zeros(max(F.max(), vertices.max()) + 1, dtype=bool)
+    mark[vertices] = True
+    band = mark[F].any(axis=1)
+    for _ in range(rings - 1):
+        mark[F[band].reshape(-1)] = True
+        band = mark[F].any(axis=1)
+    return band
+
+
+def _ref_adjacent_face_pairs(F):
+    m = len(F)
+    n = int(F.max()) + 1
+    he = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    face = np.tile(np.arange(m), 3)
+    lo, hi = np.minimum(he[:, 0], he[:, 1]), np.maximum(he[:, 0], he[:, 1])
+    key = lo * n + hi
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    same = np.flatnonzero(k[1:] == k[:-1])
+    pairs = np.stack([face[order[same]], face[order[same + 1]]], axis=1)
+    edges = np.stack([lo[order[same]], hi[order[same]]], axis=1)
+    return pairs, edges
+
+
+def _ref_seam_frames(V, F, curve, closed, radius=None, curve_points=None):
+    """seam_frames over all faces through the sparse incidence matrix, as it was."""
+    P = V[curve] if curve_points is None else curve_points
+    normals, areas = _ref_face_normals_areas(V, F)
+    W = frames.vertex_face_matrix(F, len(V))[curve].multiply(areas[None, :]).tocsr()
+    n = frames.unit(W @ normals)
+    span = 1
+    if radius is not None and radius > 0:
+        seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
+        span = int(np.clip(round(radius / max(float(seg.mean()), 1e-300)), 1, max(1, len(P) // 4)))
+    T = frames._curve_tangents(P, closed, span)
+    if radius is not None and radius > 0:
+        n = frames._quadric_normals(V, P, n, T, radius)
+    h = frames.unit(np.cross(n, T))
+    centroid_offset = (W @ V[F].mean(axis=1)) / np.maximum(np.asarray(W.sum(axis=1)), 1e-300) - P
+    flip = np.einsum("ij,ij->i", h, centroid_offset) < 0
+    h[flip] *= -1.0
+    return frames.SeamFrames(normal=n, tangent=T, inward=h)
+
+
+def _ref_point_polyline_distance(P, C, closed):
+    B = np.roll(C, -1, axis=0) if closed else C[1:]
+    A = C[: len(B)]
+    AB = B - A
+    ab2 = np.maximum(np.einsum("ij,ij->i", AB, AB), 1e-300)
+    t = np.clip(np.einsum("pkj,kj->pk", P[:, None, :] - A[None], AB) / ab2, 0.0, 1.0)
+    D = A[None] + t[..., None] * AB[None] - P[:, None, :]
+    return np.sqrt(np.einsum("pkj,pkj->pk", D, D).min(axis=1))
+
+
+def _cgal_pairs(V, F, faces=None):
+    """Self-intersecting pairs straight from CGAL, on every tested face."""
+    sel = np.arange(len(F)) if faces is None else np.flatnonzero(faces)
+    if sel.size < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    used, local = np.unique(F[sel], return_inverse=True)
+    pairs = cgal.remesh_self_intersections(
+        np.ascontiguousarray(V[used], dtype=np.float64),
+        np.ascontiguousarray(local.reshape(-1, 3).astype(np.int64)),
+        detect_only=True,
+    )[2]
+    pairs = np.sort(sel[np.asarray(pairs, dtype=np.int64).reshape(-1, 2)], axis=1)
+    return np.unique(pairs, axis=0) if len(pairs) else pairs
+
+
+def _random_soup(rng, n_faces, n_vertices, scale):
+    """Faces on shared random vertices, crossing each other often."""
+    V = rng.normal(size=(n_vertices, 3)) * scale
+    F = np.array([rng.choice(n_vertices, 3, replace=False) for _ in range(n_faces)])
+    return V, F
+
+
+# -- floating-point kernels -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32, np.int64])
+def test_face_normals_areas_match_the_row_wise_formulation(joins, dtype):
+    rng = np.random.default_rng(0)
+    V = (rng.normal(size=(400, 3)) * 10.0 ** rng.uniform(-4, 4, size=(400, 1))).astype(dtype)
+    F = rng.integers(0, 400, size=(2000, 3))
+    F[:50, 2] = F[:50, 0]  # zero-area faces get zero normals
+    meshes = [(V, F)] + [(r.guest.V.astype(dtype), r.guest.F) for _, r in joins.values()]
+    for V, F in meshes:
+        N, A = frames.face_normals_areas(V, F)
+        N0, A0 = _ref_face_normals_areas(V, F)
+        _assert_same(N, N0)
+        _assert_same(A, A0)
+        _assert_same(frames.face_areas(V, F), A0)
+
+
+def test_edge_strain_and_displacement_match_row_norms(joins):
+    for _, res in joins.values():
+        V0, V1, F = res.rest_guest.V, res.guest.V, res.guest.F
+        E = np.asarray(igl.edges(F), dtype=np.int64)
+        l0 = np.linalg.norm(V0[E[:, 0]] - V0[E[:, 1]], axis=1)
+        l1 = np.linalg.norm(V1[E[:, 0]] - V1[E[:, 1]], axis=1)
+        _assert_same(metrics.edge_strain(V0, V1, E), (l1 - l0) / np.where(l0 > 0, l0, np.nan))
+        R, t = rigid_fit(V0, V1)
+        _assert_same(
+            metrics.nonrigid_displacement(V0, V1), np.linalg.norm(V1 - (V0 @ R.T + t), axis=1)
+        )
+        ratio = metrics.area_ratio(V0, V1, F)
+        a0, a1 = _ref_face_normals_areas(V0, F)[1], _ref_face_normals_areas(V1, F)[1]
+        _assert_same(ratio, a1 / np.where(a0 > 0, a0, np.nan))
+
+
+def test_ring_band_matches_the_any_loop(joins):
+    rng = np.random.default_rng(1)
+    for _, res in joins.values():
+        F = res.merged.mesh.F
+        for rings in (1, 2, 3, 4):
+            _assert_same(
+                metrics.ring_band(F, res.merged.seam, rings),
+                _ref_ring_band(F, res.merged.seam, rings),
+            )
+        some = rng.choice(F.max() + 1, 7, replace=False)
+        _assert_same(metrics.ring_band(F, some, 2), _ref_ring_band(F, some, 2))
+
+
+def test_adjacent_face_pairs_keep_the_stable_order():
+    rng = np.random.default_rng(2)
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.5)
+    extra = s.guest.F[rng.integers(0, s.guest.n_faces, 20)]
+    # with repeated faces some edges carry 3 or 4 faces: several pairs per edge
+    for F in (
+        s.guest.F,
+        np.vstack([s.guest.F, extra, extra[:, ::-1]]),
+        rng.integers(0, 9, (60, 3)),
+    ):
+        got, ref = metrics._adjacent_face_pairs(F), _ref_adjacent_face_pairs(F)
+        _assert_same(got[0], ref[0])
+        _assert_same(got[1], ref[1])
+    # the fall-back for keys whose packed form would overflow int64
+    key = rng.integers(0, 5, 100)
+    _assert_same(metrics._stable_key_order(key, 2**62), np.argsort(key, kind="stable"))
+    _assert_same(metrics._stable_key_order(key, 5), np.argsort(key, kind="stable"))
+
+
+def test_folded_pairs_and_dihedral_angles_match_fancy_indexing(joins):
+    for _, res in joins.values():
+        V0, F = res.rest_guest.V, res.guest.F
+        # a deformation that folds some pairs: every other vertex pushed along z
+        V1 = res.guest.V + np.where(np.arange(len(V0)) % 2, 3.0, -3.0)[:, None] * [0, 0, 1]
+        pairs, edges = _ref_adjacent_face_pairs(F)
+        limit = np.cos(np.radians(150.0))
+        n0, _ = _ref_face_normals_areas(V0, F)
+        n1, _ = _ref_face_normals_areas(V1, F)
+        c0 = np.einsum("ij,ij->i", n0[pairs[:, 0]], n0[pairs[:, 1]])
+        c1 = np.einsum("ij,ij->i", n1[pairs[:, 0]], n1[pairs[:, 1]])
+        expected = pairs[(c1 < limit) & (c0 >= limit)]
+        assert len(expected)  # the push folds pairs, so the comparison means something
+        _assert_same(metrics.folded_pairs(V0, V1, F), expected)
+        got_edges, angles = metrics.edge_dihedral_angles(V1, F)
+        cos = np.einsum("ij,ij->i", n1[pairs[:, 0]], n1[pairs[:, 1]])
+        _assert_same(got_edges, edges)
+        _assert_same(angles, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
+# -- seam frames on the faces at the curve ----------------------------------------------------
+
+
+def test_curve_face_weights_are_the_sparse_product():
+    rng = np.random.default_rng(3)
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.4)
+    for trial in range(60):
+        if trial % 2:
+            F, n = s.guest.F[rng.random(s.guest.n_faces) < 0.5], s.guest.n_vertices
+        else:  # small random complexes, some faces repeating a vertex
+            n = 12
+            F = rng.integers(0, n, size=(rng.integers(1, 30), 3))
+        areas = rng.random(len(F))
+        areas[rng.random(len(F)) < 0.2] = 0.0  # explicit zeros stay
+        curve = rng.integers(0, n, size=rng.integers(1, 40))  # repeated curve vertices too
+        got = frames._curve_face_weights(F, curve, n, areas)
+        ref = frames.vertex_face_matrix(F, n)[curve].multiply(areas[None, :]).tocsr()
+        assert got.shape == ref.shape
+        for name in ("indptr", "indices", "data"):
+            _assert_same(getattr(got, name), getattr(ref, name))
+        X = rng.normal(size=(len(F), 3))
+        _assert_same(got @ X, ref @ X)
+        _assert_same(np.asarray(got.sum(axis=1)), np.asarray(ref.sum(axis=1)))
+    assert isinstance(got, sp.csr_matrix)
+
+
+def test_seam_frames_match_frames_over_all_faces(joins):
+    for _, res in joins.values():
+        sm = res.seams[0]
+        cases = [
+            (res.host.V, res.host.F, sm.host_curve, sm.closed, {}),
+            (res.host.V, res.host.F, sm.host_curve, sm.closed, {"radius": 2.0}),
+            (
+                res.guest.V,
+                res.guest.F,
+                sm.guest_at_host,
+                sm.closed,
+                {"curve_points": res.host.V[sm.host_curve]},
+            ),
+        ]
+        for V, F, curve, closed, kw in cases:
+            got = frames.seam_frames(V, F, curve, closed, **kw)
+            ref = _ref_seam_frames(V, F, curve, closed, **kw)
+            for name in ("normal", "tangent", "inward"):
+                _assert_same(getattr(got, name), getattr(ref, name))
+
+
+def test_crease_and_host_dihedral_angles_match_the_plain_computation(joins):
+    for s, res in joins.values():
+        sm = res.seams[0]
+        host = _ref_seam_frames(res.host.V, res.host.F, sm.host_curve, sm.closed)
+        guest = _ref_seam_frames(
+            res.guest.V,
+            res.guest.F,
+            sm.guest_at_host,
+            sm.closed,
+            curve_points=res.host.V[sm.host_curve],
+        )
+        cos = np.einsum("ij,ij->i", guest.inward, -host.inward)
+        crease = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+        _assert_same(sm.crease, crease)
+        for _ in range(2):  # computed, then read from the host's cache
+            _assert_same(
+                metrics.crease_angles(
+                    res.host.V,
+                    res.host.F,
+                    sm.host_curve,
+                    res.guest.V,
+                    res.guest.F,
+                    sm.guest_at_host,
+                    sm.closed,
+                ),
+                crease,
+            )
+        F = s.host.F
+        band = F[_ref_ring_band(F, s.host_curve, metrics.HOST_DIHEDRAL_RINGS)]
+        pairs, _ = _ref_adjacent_face_pairs(band)
+        N, _ = _ref_face_normals_areas(s.host.V, band)
+        dih = np.degrees(
+            np.arccos(np.clip(np.einsum("ij,ij->i", N[pairs[:, 0]], N[pairs[:, 1]]), -1.0, 1.0))
+        )
+        for _ in range(2):
+            _assert_same(metrics.host_dihedral_angles(s.host.V, s.host.F, s.host_curve), dih)
+        assert res.metrics["host_dihedral_deg"]["max"] == float(dih.max())
+        assert res.metrics["crease_deg"]["max"] == float(crease.max())
+
+
+# -- the host cache ---------------------------------------------------------------------------
+
+
+def test_host_cache_is_never_stale():
+    s = phantoms.paper_sample("end_to_end", "equal", resolution=0.4)
+    V, F, curve = s.host.V.copy(), s.host.F.copy(), s.host_curve  # writeable arrays
+    first = metrics.host_dihedral_angles(V, F, curve)
+    first[:] = -1.0  # a caller writing into the result does not reach the cache
+    assert (metrics.host_dihedral_angles(V, F, curve) >= 0).all()
+    # move the vertices in place: the values follow the new positions
+    V *= np.array([1.0, 1.0, 3.0])
+    stretched = metrics.host_dihedral_angles(V, F, curve)
+    _assert_same(stretched, metrics.host_dihedral_angles(V.copy(), F, curve))
+    assert not np.array_equal(stretched, metrics.host_dihedral_angles(s.host.V, s.host.F, curve))
+    # change the faces in place: each face then starts at another corner, which rounds
+    # its normal differently; the values follow the new faces
+    F[:] = F[:, [1, 2, 0]]
+    turned = metrics.host_dihedral_angles(V, F, curve)
+    _assert_same(turned, metrics.host_dihedral_angles(V.copy(), F.copy(), curve))
+    assert not np.array_equal(turned, stretched)
+    # the same curve as int32 (other bytes) and another ring count are other keys
+    _assert_same(metrics.host_dihedral_angles(V, F, curve.astype(np.int32)), turned)
+    assert len(metrics.host_dihedral_angles(V, F, curve, rings=1)) < len(turned)
+    with pytest.raises(igljoin.OptionsError):
+        metrics.host_dihedral_angles(V, F, curve, rings=True)
+    # the entry goes with the array
+    key = id(V)
+    assert key in metrics._MEMO
+    del V
+    gc.collect()
+    assert key not in metrics._MEMO
+
+
+def test_host_cache_keeps_few_meshes():
+    rng = np.random.default_rng(4)
+    kept = []
+    for _ in range(metrics._MEMO_MESHES + 3):
+        V = rng.normal(size=(10, 3))
+        kept.append(V)
+        metrics._mesh_memo(V, np.array([[0, 1, 2]]))
+    assert len(metrics._MEMO) <= metrics._MEMO_MESHES
+
+
+# -- point to polyline distances --------------------------------------------------------------
+
+
+@pytest.mark.parametrize("closed", [True, False])
+def test_pruned_polyline_distances_equal_all_pairs(closed):
+    rng = np.random.default_rng(5 + closed)
+    for trial in range(12):
+        k = int(rng.integers(60, 400))
+        t = np.linspace(0.0, 2 * np.pi, k, endpoint=False)
+        C = np.column_stack([np.cos(t), np.sin(t), 0.1 * np.sin(5 * t)]) * 10.0 ** rng.uniform(
+            -3, 3
+        )
+        C += rng.normal(scale=1e-3, size=C.shape) * np.abs(C).max()
+        if trial % 3 == 0:
+            C[5] = C[4]  # a zero-length segment
+            C[40:60] *= 1.5  # segments of very different lengths
+        size = np.abs(C).max()
+        near = C[rng.integers(0, k, 150)] + rng.normal(scale=1e-2 * size, size=(150, 3))
+        far = rng.normal(scale=3 * size, size=(40, 3))  # far from the curve: many candidates
+        on = C[rng.integers(0, k, 30)]  # exactly on vertices: distance 0
+        P = np.vstack([near, far, on])
+        assert len(P) * (k if closed else k - 1) > metrics._DENSE_PAIRS  # the pruned path
+        _assert_same(
+            metrics.point_polyline_distance(P, C, closed),
+            _ref_point_polyline_distance(P, C, closed),
+        )
+
+
+def test_seam_gap_matches_all_pairs(joins):
+    for _, res in joins.values():
+        for sm in res.seams:
+            P, C = res.guest.V[sm.seam], res.host.V[sm.host_curve]
+            d = _ref_point_polyline_distance(P, C, sm.closed)
+            gap = metrics.seam_gap(P, C, sm.closed)
+            assert gap["max"] == float(d.max()) and gap["mean"] == float(d.mean())
+            assert res.metrics["seams"][0]["seam_gap"] == gap
+
+
+# -- weld: manifold checks and seam orientation -----------------------------------------------
+
+
+def _libigl_checks(F):
+    ids, local = np.unique(F, return_inverse=True)
+    local = local.reshape(F.shape)
+    return (
+        bool(igl.is_edge_manifold(local)[0]),
+        np.asarray(igl.is_vertex_manifold(local), dtype=bool).reshape(-1),
+        local,
+        len(ids),
+    )
+
+
+def test_compiled_manifold_checks_match_libigl():
+    rng = np.random.default_rng(6)
+    G = phantoms.paper_sample("partial_patch", "equal", resolution=0.4).guest.F
+    seen = set()
+    for trial in range(240):
+        kind = trial % 4
+        if kind == 0:  # subsets: holes, bow-tie vertices
+            F = G[rng.random(len(G)) < rng.uniform(0.2, 1.0)]
+        elif kind == 1:  # repeated faces, either way round: edges with 3 or 4 faces
+            extra = G[rng.integers(0, len(G), 3)]
+            F = np.vstack([G, extra if trial % 8 else extra[:, ::-1]])
+        elif kind == 2:  # tiny random complexes
+            F = rng.integers(0, 8, size=(rng.integers(1, 12), 3))
+            F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])]
+            if not len(F):
+                continue
+        else:  # two copies glued at a few vertices
+            H = G + G.max() + 1
+            glue = rng.integers(0, G.max() + 1, 3)
+            H = np.where(np.isin(H - G.max() - 1, glue), H - G.max() - 1, H)
+            F = np.vstack([G, H])
+        edge_ok, vertex_ok, local, n = _libigl_checks(F)
+        got = weld_mod._manifold_checks(local, n)
+        assert got is not None
+        assert got[0] == edge_ok
+        _assert_same(got[1], vertex_ok)
+        seen.add((edge_ok, bool(vertex_ok.all())))
+    assert len(seen) == 4  # every combination of outcomes was exercised
+    assert weld_mod._manifold_checks(np.array([[0, 1, 1], [1, 2, 3]]), 4) is None
+
+
+def _weld_error(res):
+    try:
+        weld_mod.weld(res)
+    except igljoin.WeldError as exc:
+        return str(exc)
+    return None
+
+
+def test_weld_errors_are_those_of_libigl(monkeypatch):
+    s = phantoms.paper_sample("end_to_end", "equal", resolution=0.5)
+    res = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve)
+    on = np.isin(res.guest.F, res.seam).sum(axis=1)
+    f2, f1 = int(np.flatnonzero(on == 2)[0]), int(np.flatnonzero(on == 1)[0])
+
+    def with_faces(F, ratio):
+        attrs = dict(res.guest.vertex_attributes)
+        return dataclasses.replace(res, guest=Mesh(res.guest.V, F, attrs), area_ratio=ratio)
+
+    G, ratio = res.guest.F, res.area_ratio
+    seam_vertex = int(G[f1][np.isin(G[f1], res.seam)][0])
+    broken = [
+        with_faces(np.vstack([G, G[f2]]), np.append(ratio, 1.0)),  # an edge with three faces
+        with_faces(np.vstack([G, [[seam_vertex, 0, 1]]]), np.append(ratio, 1.0)),  # second fan
+        with_faces(np.delete(G, f2, axis=0), np.delete(ratio, f2)),  # a hole at the seam
+        with_faces(np.vstack([G[:-1], G[-1:, ::-1]]), ratio),  # one face reversed
+        res,
+    ]
+    fast = [_weld_error(r) for r in broken]
+    monkeypatch.setattr(weld_mod, "_fans_compiled", None)  # libigl alone, as before
+    assert [_weld_error(r) for r in broken] == fast
+    assert fast[-1] is None and fast[0] and fast[1] and fast[3]
+
+
+def test_seam_orientation_counts_only_need_the_seam_faces(joins):
+    for _, res in joins.values():
+        w = res.merged
+        F, n = w.mesh.F, w.mesh.n_vertices
+        keys_all = weld_mod._directed_keys(F, n)
+        keys_seam = weld_mod._directed_keys(F[metrics.ring_band(F, w.seam, 1)], n)
+        for mseam, sm in zip(w.seams, res.seams):
+            u = mseam if sm.closed else mseam[:-1]
+            v = np.roll(mseam, -1) if sm.closed else mseam[1:]
+            for a, b in ((u, v), (v, u)):
+                _assert_same(
+                    weld_mod._directed_count(keys_seam, a, b, n),
+                    weld_mod._directed_count(keys_all, a, b, n),
+                )
+
+
+# -- self-intersections -----------------------------------------------------------------------
+
+
+def _check_self_intersections(V, F, faces=None):
+    """Fast pairs equal CGAL's on all faces, and no face CGAL reports is set aside."""
+    ref = _cgal_pairs(V, F, faces)
+    _assert_same(metrics.self_intersections(V, F, faces), ref)
+    sel = np.arange(len(F)) if faces is None else np.flatnonzero(faces)
+    if metrics._apart is not None and sel.size >= 2:
+        sub = np.ascontiguousarray(F[sel])
+        apart = metrics._apart(np.ascontiguousarray(np.take(V, sub, axis=0)), sub)
+        reported = np.isin(sel, ref.reshape(-1))
+        assert not (apart & reported).any()
+    return ref
+
+
+def test_self_intersections_of_random_soups():
+    rng = np.random.default_rng(7)
+    found = 0
+    for _ in range(40):
+        scale = 10.0 ** rng.uniform(-6, 6)
+        V, F = _random_soup(rng, int(rng.integers(20, 120)), int(rng.integers(10, 80)), scale)
+        V += rng.normal(size=3) * 1e3 * scale  # far from the origin: rounding matters
+        found += len(_check_self_intersections(V, F))
+    assert found > 100
+
+
+def test_self_intersections_of_exact_touching_configurations():
+    """Integer coordinates: vertices on faces, edges through edges, coplanar overlaps."""
+    rng = np.random.default_rng(8)
+    found = 0
+    for trial in range(60):
+        V = rng.integers(-3, 4, size=(40, 3)).astype(np.float64)
+        if trial % 2:
+            V[:, 2] = 0.0  # all coplanar: only CGAL's coplanar tests decide
+        if trial % 3 == 0:
+            V[20:] = V[:20]  # the same points under other indices
+        F = np.array([rng.choice(40, 3, replace=False) for _ in range(50)])
+        found += len(_check_self_intersections(V, F))
+    # a flat grid, a face folded exactly onto its neighbour, and a duplicated face
+    grid = phantoms.paper_sample("open_strip", "equal").host
+    V, F = grid.V.copy(), grid.F.copy()
+    pairs, _ = _ref_adjacent_face_pairs(F)
+    a, b = pairs[len(pairs) // 2]
+    moved = np.setdiff1d(F[a], F[b])[0]
+    opposite = np.setdiff1d(F[b], F[a])[0]
+    V[moved] = 0.5 * (V[moved] + V[opposite]) * 0 + V[opposite]  # onto the neighbour's corner
+    F = np.vstack([F, F[3]])
+    found += len(_check_self_intersections(V, F))
+    assert found > 50
+
+
+def _flat_grid(n: int, offset=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """An n x n vertex grid of unit squares in the plane z = 0, two triangles per square."""
+    x = np.arange(n, dtype=np.float64)
+    X, Y = np.meshgrid(x, x, indexing="ij")
+    V = np.column_stack([X.ravel(), Y.ravel(), np.zeros(n * n)]) + np.asarray(offset)
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
+    a = (i * n + j).ravel()
+    F = np.concatenate([np.stack([a, a + n, a + n + 1], 1), np.stack([a, a + n + 1, a + 1], 1)])
+    return V, F
+
+
+def test_self_intersections_of_touching_grids():
+    """Grids meeting exactly: overlapping in their plane, crossing, touching along a line."""
+    V1, F1 = _flat_grid(8)
+    found = 0
+    for offset, turn in (
+        ((0.5, 0.5, 0.0), False),  # coplanar, half a square over: every face overlaps
+        ((0.0, 0.0, 0.0), False),  # the same points under other indices
+        ((20.0, 0.0, 0.0), False),  # apart
+        ((0.0, 3.0, 0.0), True),  # upright, its lower edge along a grid line: touching
+        ((0.0, 3.5, -2.0), True),  # upright, through the middle of a row of squares
+    ):
+        V2, F2 = _flat_grid(6, (0.0, 0.0, 0.0))
+        if turn:
+            V2 = V2[:, [0, 2, 1]]  # into the plane y = 0
+        V2 = V2 + np.asarray(offset)
+        V = np.vstack([V1, V2])
+        F = np.vstack([F1, F2 + len(V1)])
+        found += len(_check_self_intersections(V, F))
+    assert found > 100
+
+
+def test_self_intersections_at_rounding_level():
+    """Grids and a tube with vertices moved by 1e-17 to 1e-9 of their size."""
+    rng = np.random.default_rng(11)
+    strip = phantoms.paper_sample("open_strip", "equal").host
+    tube = phantoms.paper_sample("end_to_end", "equal", resolution=0.4).host
+    V0, F0 = _flat_grid(12)
+    kept = 0
+    for trial in range(24):
+        mesh = (
+            (strip.V, strip.F)
+            if trial % 3 == 0
+            else (tube.V, tube.F)
+            if trial % 3 == 1
+            else (V0, F0)
+        )
+        V, F = mesh[0].copy(), mesh[1]
+        size = float(np.abs(V).max())
+        moved = rng.random(len(V)) < 0.3
+        V[moved] += rng.normal(size=(moved.sum(), 3)) * size * 10.0 ** rng.uniform(-17, -9)
+        # and a few vertices pushed exactly onto a neighbour's neighbour
+        for _ in range(3):
+            f = rng.integers(0, len(F))
+            V[F[f, 0]] = V[F[f, 1]] + (V[F[f, 2]] - V[F[f, 1]]) * 0.5
+        _check_self_intersections(V, F)
+        sub = np.ascontiguousarray(F)
+        kept += int((~metrics._apart(np.ascontiguousarray(np.take(V, sub, axis=0)), sub)).sum())
+    assert kept  # the sign tests met cases they could not decide
+
+
+def test_self_intersections_of_real_meshes():
+    pytest.importorskip("pymeshlab")
+    from .cuts import sample_mesh_dir
+
+    rng = np.random.default_rng(9)
+    meshes = 0
+    for path in sorted(sample_mesh_dir().rglob("*")):
+        if path.suffix.lower() not in {".obj", ".ply", ".off", ".stl"}:
+            continue
+        try:
+            mesh = igljoin.read_mesh(path)
+        except igljoin.MeshError:
+            continue
+        if mesh.n_faces > 30_000:
+            continue
+        V, F = mesh.V, mesh.F
+        _check_self_intersections(V, F)
+        # a crumpled copy: vertices shaken by about an edge length
+        edge = float(np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean())
+        _check_self_intersections(V + rng.normal(scale=edge, size=V.shape), F)
+        meshes += 1
+    assert meshes >= 3
+
+
+def test_self_intersections_of_welded_joins(joins):
+    for _, res in joins.values():
+        w = res.merged
+        band = metrics.ring_band(w.mesh.F, w.seam, metrics.SELF_INTERSECTION_RINGS)
+        _check_self_intersections(w.mesh.V, w.mesh.F, band)
+        assert res.metrics["self_intersections"]["pairs"] == len(
+            _cgal_pairs(w.mesh.V, w.mesh.F, band)
+        )
+    # the bypass graft crosses itself near its seams, and a guest pushed through its host
+    g = phantoms.bypass_graft_sample(resolution=0.6)
+    res = igljoin.join(g.hosts, g.guest, seams=g.seams)
+    w = res.merged
+    band = metrics.ring_band(w.mesh.F, w.seam, metrics.SELF_INTERSECTION_RINGS)
+    assert len(_check_self_intersections(w.mesh.V, w.mesh.F, band))
+    s, res = joins["partial_patch", "equal"]
+    X = res.guest.V.copy()
+    inner = np.setdiff1d(
+        np.unique(res.guest.F[np.isin(res.guest.F, res.seam).any(axis=1)]), res.seam
+    )
+    X[inner] -= 2.0 * np.array([0.0, 0.0, 1.0]) * np.sign(np.mean(res.guest.V[:, 2]) + 1e-9)
+    pushed = dataclasses.replace(res, guest=Mesh(X, res.guest.F, res.guest.vertex_attributes))
+    pw = pushed.merged
+    band = metrics.ring_band(pw.mesh.F, pw.seam, metrics.SELF_INTERSECTION_RINGS)
+    assert len(_check_self_intersections(pw.mesh.V, pw.mesh.F, band))
+
+
+def test_self_intersections_without_numba_are_the_same(monkeypatch, joins):
+    rng = np.random.default_rng(10)
+    V, F = _random_soup(rng, 80, 50, 1.0)
+    s, res = joins["end_to_end", "equal"]
+    w = res.merged
+    band = metrics.ring_band(w.mesh.F, w.seam, 3)
+    fast = [metrics.self_intersections(V, F), metrics.self_intersections(w.mesh.V, w.mesh.F, band)]
+    monkeypatch.setattr(metrics, "_apart", None)
+    slow = [metrics.self_intersections(V, F), metrics.self_intersections(w.mesh.V, w.mesh.F, band)]
+    for a, b in zip(fast, slow):
+        _assert_same(a, b)
+    assert len(fast[0])
