@@ -537,12 +537,14 @@ def check_welded(welded: Welded, *, full: bool = False) -> None:
     )
     manifold = True
     if not edges_ok:
+        # libigl flags the *manifold* edges True in BE
         manifold, _, E, _, BE = igl.is_edge_manifold(local)
         E = ids[np.asarray(E, dtype=np.int64)]
+        crowded = ~np.asarray(BE, dtype=bool).reshape(-1)
     if not manifold:
         raise WeldError(
-            f"weld: {int(np.sum(BE))} edges have more than two faces "
-            f"{_offenders(welded, E[BE])}; a guest triangle across the seam duplicates a host "
+            f"weld: {int(crowded.sum())} edges have more than two faces "
+            f"{_offenders(welded, E[crowded])}; a guest triangle across the seam duplicates a host "
             "edge there — refine the guest near the seam (igljoin.clean) or pick curves that "
             "do not cut corners"
         )
