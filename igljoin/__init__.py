@@ -29,7 +29,7 @@ from .errors import (
     WeldError,
 )
 from .io import read_mesh, write_mesh
-from .join import JoinResult, JoinSolver, join
+from .join import JoinResult, JoinSolver, SolveProgress, join
 from .mesh import Mesh, as_mesh
 from .options import JoinOptions
 from .spec import CaseSpec, load_case
@@ -52,6 +52,7 @@ __all__ = [
     "JoinOptions",
     "JoinResult",
     "JoinSolver",
+    "SolveProgress",
     "Mesh",
     "MeshError",
     "MeshReadError",

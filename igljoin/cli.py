@@ -253,6 +253,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--snapshot", action="store_true", help="also render OUT/snapshot.png (needs the viz extra)"
     )
     p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
+    p.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no status line on stderr (shown only on a terminal, for solves over a second)",
+    )
     p.set_defaults(func=_cmd_join, parser=p)
 
     p = sub.add_parser(
@@ -530,11 +535,66 @@ def _viz():
 # --------------------------------------------------------------------------- commands
 
 
+class SolveStatus:
+    """A one-line status of a long solve on a terminal: iteration, energy, seconds.
+
+    Use it as the ``progress`` callable of a join. Nothing is drawn before
+    the iteration has run ``delay`` seconds (fast joins stay quiet); the
+    line is redrawn at most every ``interval`` seconds and erased by
+    :meth:`close`.
+
+    Parameters
+    ----------
+    stream : text stream
+        Where to draw (``sys.stderr`` on a terminal).
+    delay : float
+        Seconds of iteration before the first draw.
+    interval : float
+        Least seconds between two draws.
+    """
+
+    def __init__(self, stream, delay: float = 1.0, interval: float = 0.2):
+        self.stream = stream
+        self.delay = delay
+        self.interval = interval
+        self._drawn_at: float | None = None
+        self._width = 0
+
+    def __call__(self, progress) -> None:
+        if progress.elapsed < self.delay:
+            return
+        if self._drawn_at is not None and progress.elapsed - self._drawn_at < self.interval:
+            return
+        text = (
+            f"{PROG}: joining, iteration {progress.iteration} (at most "
+            f"{progress.max_iterations}), energy {progress.energy:.6g}, "
+            f"{progress.elapsed:.0f} s"
+        )
+        self.stream.write("\r" + text.ljust(self._width))
+        self.stream.flush()
+        self._width = len(text)
+        self._drawn_at = progress.elapsed
+
+    def close(self) -> None:
+        """Erase the line (if one was drawn)."""
+        if self._width:
+            self.stream.write("\r" + " " * self._width + "\r")
+            self.stream.flush()
+            self._width = 0
+
+
 def _cmd_join(parser, args) -> int:
     from .pipeline import run_case
 
     spec = _spec_from_args(parser, args, args.host, args.guest)
-    row = run_case(spec, args.out, snapshots=args.snapshot, record_errors=False)
+    status = None if args.no_progress or not sys.stderr.isatty() else SolveStatus(sys.stderr)
+    try:
+        row = run_case(
+            spec, args.out, snapshots=args.snapshot, record_errors=False, progress=status
+        )
+    finally:
+        if status is not None:
+            status.close()
     files = sorted(p.name for p in Path(args.out).iterdir())
     if args.json:
         _print_json({"out": args.out, "files": files, "summary": row})

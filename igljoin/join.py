@@ -39,7 +39,7 @@ from .terms import (
 )
 from .validate import check_guest_reaches_seam, check_surface
 
-__all__ = ["JoinSolver", "JoinResult", "SeamPair", "join"]
+__all__ = ["JoinSolver", "JoinResult", "SeamPair", "SolveProgress", "join"]
 
 # options that change the quadratic form (and so need a new factorization)
 _STRUCTURAL = {
@@ -267,6 +267,35 @@ def _resolve_stiffness(guest: Mesh, options: Any, overrides: dict, regions: Any)
             "unset (it is set from where the map was found)"
         )
     return {**overrides, "stiffness": values, "stiffness_on": on}
+
+
+@dataclass(frozen=True)
+class SolveProgress:
+    """State of a running solve, passed to the ``progress`` callable after every iteration.
+
+    Attributes
+    ----------
+    iteration : int
+        Iterations done (1, 2, ...).
+    max_iterations : int
+        The solve stops at this count at the latest.
+    energy : float
+        Energy after this iteration.
+    elapsed : float
+        Seconds since the iteration started (after setup and factorization).
+    """
+
+    iteration: int
+    max_iterations: int
+    energy: float
+    elapsed: float
+
+
+def _check_progress(progress: Any) -> None:
+    if progress is not None and not callable(progress):
+        raise OptionsError(
+            f"progress={progress!r} must be a callable taking an igljoin.SolveProgress (or None)"
+        )
 
 
 class JoinSolver:
@@ -610,7 +639,9 @@ class JoinSolver:
             lo, hi = (mid, hi) if area(mid) < rest else (lo, mid)
         return X + 0.5 * (lo + hi) * lift
 
-    def solve(self, targets: np.ndarray | None = None, **changes: Any) -> JoinResult:
+    def solve(
+        self, targets: np.ndarray | None = None, *, progress: Any = None, **changes: Any
+    ) -> JoinResult:
         """Deform the guest.
 
         Parameters
@@ -619,6 +650,9 @@ class JoinSolver:
             New positions for the seam vertices, in the order of
             ``JoinResult.seam`` (seam after seam; default: the host curve
             correspondence). Reuses the factorization.
+        progress : callable, optional
+            Called with a :class:`SolveProgress` after every iteration (for
+            a progress display of long solves; it should return quickly).
         **changes
             Option changes applied first (see :meth:`update`).
 
@@ -626,6 +660,7 @@ class JoinSolver:
         -------
         JoinResult
         """
+        _check_progress(progress)
         if changes:
             self.update(**changes)
         c = self.corr
@@ -639,6 +674,11 @@ class JoinSolver:
         t0 = time.perf_counter()
         X0 = self.initial_guess(bc)
         t1 = time.perf_counter()
+
+        def report(iteration: int, energy: float) -> None:
+            elapsed = time.perf_counter() - t1
+            progress(SolveProgress(iteration, opt.max_iterations, float(energy), elapsed))
+
         run = self.solver.run(
             X0,
             bc,
@@ -647,6 +687,7 @@ class JoinSolver:
             time_limit=opt.time_limit,
             scale=self.guest_mean_edge,
             acceleration=opt.acceleration,
+            callback=None if progress is None else report,
         )
         t2 = time.perf_counter()
         self.last_run = run
@@ -821,12 +862,14 @@ def join(
     seams: Any = None,
     smooth: bool = True,
     stiffness_regions: Any = None,
+    progress: Any = None,
     **options: Any,
 ) -> JoinResult:
     """Deform ``guest`` so that its curves join ``host``'s curves exactly and smoothly.
 
     Same as ``JoinSolver(host, guest, host_curve, guest_curve, seams=seams,
-    smooth=smooth, stiffness_regions=stiffness_regions, **options).solve()``.
+    smooth=smooth, stiffness_regions=stiffness_regions,
+    **options).solve(progress=progress)``.
 
     Parameters
     ----------
@@ -843,6 +886,8 @@ def join(
         Include the smooth-join terms.
     stiffness_regions : list of (vertex_indices, k), optional
         Relative stiffness of regions of guest vertices (1 elsewhere).
+    progress : callable, optional
+        Called with a :class:`SolveProgress` after every iteration.
     **options
         See :class:`igljoin.JoinOptions`; ``stiffness`` may be an array
         (per guest vertex or face) or the name of a guest attribute.
@@ -859,6 +904,7 @@ def join(
     >>> res.converged, len(res.seams)
     (True, 2)
     """
+    _check_progress(progress)  # before the setup, which can take long on big meshes
     return JoinSolver(
         host,
         guest,
@@ -868,4 +914,4 @@ def join(
         smooth=smooth,
         stiffness_regions=stiffness_regions,
         **options,
-    ).solve()
+    ).solve(progress=progress)

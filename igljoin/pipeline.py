@@ -228,7 +228,7 @@ class SolvedCase:
     timings: dict = field(default_factory=dict)
 
 
-def solve_case(spec: CaseSpec, *, step: _Step | None = None) -> SolvedCase:
+def solve_case(spec: CaseSpec, *, step: _Step | None = None, progress: Any = None) -> SolvedCase:
     """Read, clean/resample (if the spec says so) and join one case, in memory.
 
     Parameters
@@ -236,6 +236,9 @@ def solve_case(spec: CaseSpec, *, step: _Step | None = None) -> SolvedCase:
     spec : CaseSpec
     step : optional
         Internal: tracks the step for error reports.
+    progress : callable, optional
+        Passed to :meth:`igljoin.JoinSolver.solve` (called with an
+        :class:`igljoin.SolveProgress` after every iteration).
 
     Returns
     -------
@@ -266,7 +269,7 @@ def solve_case(spec: CaseSpec, *, step: _Step | None = None) -> SolvedCase:
     timings["clean"] = time.perf_counter() - t
     t = time.perf_counter()
     step.name = "join"
-    result = JoinSolver(host, guest, hc, gc, options).solve()
+    result = JoinSolver(host, guest, hc, gc, options).solve(progress=progress)
     timings["join"] = time.perf_counter() - t
     return SolvedCase(
         spec=spec,
@@ -407,6 +410,7 @@ def run_case(
     *,
     snapshots: bool = False,
     record_errors: bool = True,
+    progress: Any = None,
 ) -> dict:
     """Run one case and write its output folder atomically.
 
@@ -426,6 +430,9 @@ def run_case(
         ``read``, ``clean``, ``join``, ``save`` or ``snapshot``) and the row
         has ``status = "failed"``. ``False``: the error is raised and ``out``
         is left as it was.
+    progress : callable, optional
+        Called with an :class:`igljoin.SolveProgress` after every iteration
+        of the join (see :meth:`igljoin.JoinSolver.solve`).
 
     Returns
     -------
@@ -453,7 +460,7 @@ def run_case(
             name = spec.name
             step.name = "read"
             inputs = spec.input_hashes()
-            solved = solve_case(spec, step=step)
+            solved = solve_case(spec, step=step, progress=progress)
             _, timings = _write_outputs(solved, inputs, tmp, snapshots, step)
             timings["total"] = time.perf_counter() - start
             atomic_write_text(tmp / TIMINGS, _json_text(timings))

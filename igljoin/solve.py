@@ -214,6 +214,7 @@ class LocalGlobalSolver:
         time_limit: float | None = None,
         scale: float = 1.0,
         acceleration: int = 5,
+        callback=None,
     ) -> IterationResult:
         """Iterate from ``X0`` (shape (n, 3)) until the iterates settle.
 
@@ -244,6 +245,8 @@ class LocalGlobalSolver:
             Length scale of the step criterion (e.g. the mean edge length).
         acceleration : int
             Quasi-Newton history length; 0 for the plain local/global iteration.
+        callback : callable, optional
+            Called as ``callback(iteration, energy)`` after every iteration.
 
         Returns
         -------
@@ -330,6 +333,8 @@ class LocalGlobalSolver:
             x, e, g, state = x_new, e_new, g_new, state_new
             energy.append(e)
             result.iterations = it
+            if callback is not None:
+                callback(it, e)
             window = energy[max(0, len(energy) - 1 - _WINDOW)] - e
             if it >= 2 and abs(window) <= tolerance * max(e, 1e-300) and move <= step_tol:
                 result.converged, result.reason = True, "tolerance"

@@ -386,6 +386,12 @@ def _corpus() -> list[Case]:
             ("unknown join options", "smooth_weight"),
         ),
         Case(
+            "progress that is not callable",
+            lambda t: _join(progress="bar"),
+            igljoin.OptionsError,
+            ("progress='bar' must be a callable", "igljoin.SolveProgress"),
+        ),
+        Case(
             "stiffness of the wrong length",
             lambda t: _join(stiffness=np.ones(3)),
             igljoin.OptionsError,

@@ -153,6 +153,35 @@ def test_join_files(patch_files, tmp_path):
     assert report["spec"]["host_curve"] == {"start": 0}
 
 
+def test_join_status_line_draws_and_erases(patch_files):
+    import io
+
+    from igljoin.cli import SolveStatus
+
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.5)
+    stream = io.StringIO()
+    status = SolveStatus(stream, delay=0.0, interval=0.0)
+    res = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve, progress=status)
+    drawn = stream.getvalue().split("\r")[1:]
+    # one draw per iteration (no delay, no throttle), each naming its iteration
+    assert len(drawn) == res.iterations
+    numbers = range(1, res.iterations + 1)
+    assert all(f"iteration {k} (at most 2000)" in d for k, d in zip(numbers, drawn))
+    status.close()
+    erased = stream.getvalue().split("\r")
+    assert erased[-1] == "" and erased[-2].strip() == ""  # the line is blanked, cursor home
+    # a quick join under the default one-second delay draws nothing
+    quiet = io.StringIO()
+    igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve, progress=SolveStatus(quiet))
+    assert quiet.getvalue() == ""
+
+
+def test_join_shows_no_status_line_off_a_terminal(patch_files, tmp_path):
+    host, guest = patch_files
+    proc = run("join", host, guest, "-o", tmp_path / "j", "--host-loop", "0")
+    assert proc.returncode == 0 and "joining, iteration" not in proc.stderr
+
+
 def test_join_with_cleanup_and_resample(tmp_path):
     s = phantoms.paper_sample("partial_patch", "equal", resolution=0.4, guest_resolution=0.2)
     host = igljoin.write_mesh(tmp_path / "host.ply", s.host)

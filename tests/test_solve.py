@@ -260,3 +260,28 @@ def test_time_limit_is_respected(tube):
     # the limit is checked after every iteration
     assert res.iterations == 1
     assert np.isfinite(res.guest.V).all()
+
+
+def test_progress_is_called_after_every_iteration(patch):
+    seen = []
+    res = igljoin.join(
+        patch.host, patch.guest, patch.host_curve, patch.guest_curve, progress=seen.append
+    )
+    assert [p.iteration for p in seen] == list(range(1, res.iterations + 1))
+    # the energies reported are the ones the result records, exactly
+    assert [p.energy for p in seen] == res.energy[1:]
+    assert all(p.max_iterations == res.options.max_iterations for p in seen)
+    elapsed = [p.elapsed for p in seen]
+    assert elapsed == sorted(elapsed) and elapsed[0] >= 0.0
+    # watching does not change the result
+    quiet = igljoin.join(patch.host, patch.guest, patch.host_curve, patch.guest_curve)
+    np.testing.assert_array_equal(res.guest.V, quiet.guest.V)
+
+
+def test_progress_on_a_resolve_and_its_errors(patch):
+    solver = _solver(patch)
+    seen = []
+    res = solver.solve(progress=seen.append, max_iterations=3)
+    assert len(seen) == res.iterations == 3 and seen[-1].max_iterations == 3
+    with pytest.raises(igljoin.OptionsError, match="must be a callable"):
+        solver.solve(progress=3)
