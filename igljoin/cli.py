@@ -256,7 +256,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--no-progress",
         action="store_true",
-        help="no status line on stderr (shown only on a terminal, for solves over a second)",
+        help="no status line on stderr (shown only on a terminal)",
     )
     p.set_defaults(func=_cmd_join, parser=p)
 
@@ -539,9 +539,9 @@ class SolveStatus:
     """A one-line status of a long solve on a terminal: iteration, energy, seconds.
 
     Use it as the ``progress`` callable of a join. Nothing is drawn before
-    the iteration has run ``delay`` seconds (fast joins stay quiet); the
-    line is redrawn at most every ``interval`` seconds and erased by
-    :meth:`close`.
+    the iteration has run ``delay`` seconds (fast joins stay quiet) unless
+    :meth:`begin` drew a line already; the line is redrawn at most every
+    ``interval`` seconds and erased by :meth:`close`.
 
     Parameters
     ----------
@@ -560,20 +560,31 @@ class SolveStatus:
         self._drawn_at: float | None = None
         self._width = 0
 
+    def begin(self, text: str) -> None:
+        """Draw ``text`` at once (e.g. what runs before the first iteration).
+
+        The first iteration then replaces it without waiting for ``delay``.
+        """
+        self._draw(text)
+        self._drawn_at = None
+
     def __call__(self, progress) -> None:
-        if progress.elapsed < self.delay:
+        if self._drawn_at is None:
+            if progress.elapsed < self.delay and not self._width:
+                return
+        elif progress.elapsed - self._drawn_at < self.interval:
             return
-        if self._drawn_at is not None and progress.elapsed - self._drawn_at < self.interval:
-            return
-        text = (
+        self._draw(
             f"{PROG}: joining, iteration {progress.iteration} (at most "
             f"{progress.max_iterations}), energy {progress.energy:.6g}, "
             f"{progress.elapsed:.0f} s"
         )
+        self._drawn_at = progress.elapsed
+
+    def _draw(self, text: str) -> None:
         self.stream.write("\r" + text.ljust(self._width))
         self.stream.flush()
         self._width = len(text)
-        self._drawn_at = progress.elapsed
 
     def close(self) -> None:
         """Erase the line (if one was drawn)."""
@@ -588,6 +599,8 @@ def _cmd_join(parser, args) -> int:
 
     spec = _spec_from_args(parser, args, args.host, args.guest)
     status = None if args.no_progress or not sys.stderr.isatty() else SolveStatus(sys.stderr)
+    if status is not None:
+        status.begin(f"{PROG}: reading, checking and factoring (large guests take a while)")
     try:
         row = run_case(
             spec, args.out, snapshots=args.snapshot, record_errors=False, progress=status

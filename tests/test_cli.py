@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -174,6 +175,61 @@ def test_join_status_line_draws_and_erases(patch_files):
     quiet = io.StringIO()
     igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve, progress=SolveStatus(quiet))
     assert quiet.getvalue() == ""
+    # a line drawn before the solve is replaced by the first iteration, then throttled
+    started = io.StringIO()
+    status = SolveStatus(started, interval=3600.0)
+    status.begin("preparing")
+    igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve, progress=status)
+    lines = started.getvalue().split("\r")[1:]
+    assert lines[0] == "preparing" and len(lines) == 2 and "iteration 1 (" in lines[1]
+    # the shorter text is padded to blank the longer one it overwrites
+    assert len(lines[1]) >= len("preparing")
+
+
+def _run_on_a_terminal(*args) -> tuple[subprocess.CompletedProcess, bytes]:
+    """Run the CLI with stderr on a pseudo-terminal; returns the process and what it drew."""
+    import os
+    import pty
+
+    leader, follower = pty.openpty()
+    command = [str(IGLJOIN), *map(str, args)]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=follower)
+    os.close(follower)
+    drawn = b""
+    while True:
+        try:
+            chunk = os.read(leader, 4096)
+        except OSError:  # the terminal closes when the process ends
+            break
+        if not chunk:
+            break
+        drawn += chunk
+    stdout = proc.stdout.read()
+    proc.wait(timeout=300)
+    os.close(leader)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, b""), drawn
+
+
+def test_join_status_line_on_a_terminal(tmp_path):
+    s = phantoms.paper_sample("end_to_end", "equal")
+    igljoin.write_mesh(tmp_path / "host.ply", s.host)
+    igljoin.write_mesh(tmp_path / "guest.ply", s.guest)
+    # the plain iteration to a tolerance it cannot reach: 3,000 iterations, over a second
+    flags = "-O acceleration=0 -O tolerance=1e-14 -O max_iterations=3000"
+    proc, drawn = _run_on_a_terminal(
+        "join", tmp_path / "host.ply", tmp_path / "guest.ply", "-o", tmp_path / "out",
+        "--host-start", "0", "--guest-loop", "0", *flags.split(),
+    )  # fmt: skip
+    assert proc.returncode == 0 and b"joined" in proc.stdout
+    lines = drawn.split(b"\r")
+    assert lines[1] == b"igljoin: reading, checking and factoring (large guests take a while)"
+    assert b"igljoin: joining, iteration 1 (at most 3000)" in lines[2]
+    # redrawn as the iteration advances (at most every 0.2 s)
+    shown = [int(m.group(1)) for m in map(re.compile(rb"iteration (\d+) ").search, lines) if m]
+    assert len(shown) >= 2 and shown == sorted(shown) and shown[-1] > shown[0]
+    # the status line is blanked at the end and nothing else is written to stderr
+    assert lines[-1] == b"" and lines[-2].strip() == b""
+    assert b"Traceback" not in drawn
 
 
 def test_join_shows_no_status_line_off_a_terminal(patch_files, tmp_path):
