@@ -32,6 +32,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .boundary import Curve, boundary_loops, polyline_length, select_curve
 from .errors import CurveError, MeshError, missing_extra
+from .frames import face_areas
 from .mesh import Mesh, as_mesh
 from .validate import relative_area_floor
 
@@ -93,10 +94,6 @@ def _edge_lengths(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     )
 
 
-def _double_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    return np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-
-
 def aspect_ratios(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Aspect ratio ``2 r / R`` of each face: 1 for equilateral, 0 for degenerate.
 
@@ -113,7 +110,7 @@ def aspect_ratios(V: np.ndarray, F: np.ndarray) -> np.ndarray:
         ``compute_selection_bad_faces`` uses.
     """
     L = _edge_lengths(V, F)
-    area = 0.5 * _double_areas(V, F)
+    area = face_areas(V, F)
     denom = L.prod(axis=1) * L.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         q = np.where(denom > 0, 16.0 * area**2 / np.where(denom > 0, denom, 1.0), 0.0)
@@ -235,7 +232,7 @@ def diagnose(mesh: Any, *, sliver_ratio: float = SLIVER_RATIO) -> dict:
     V, F = m.V, m.F
     n = m.n_vertices
     degenerate = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
-    area2 = _double_areas(V, F)
+    area2 = 2.0 * face_areas(V, F)
     floor = relative_area_floor * max(float(area2.mean()), 1e-300)
     zero = ~degenerate & (area2 <= floor)
     sliver = ~degenerate & ~zero & (aspect_ratios(V, F) < sliver_ratio)
