@@ -36,8 +36,8 @@ def test_minimum_is_strict_and_p_is_stiffer_in_soft_modes(study):
     assert result["P"]["min"] > 0 and result["Q"]["min"] > 0
     # soft modes exist: P overstates the stiffness of some modes at least tenfold
     assert result["P"]["min"] < 0.1 and result["P"]["condition"] > 10
-    counts = [result["P"]["below"][k] for k in ("0.05", "0.1", "0.2", "0.3")]
-    assert counts == sorted(counts) and counts[-1] <= result["free_coordinates"]
+    # ... but only a tail of them: P models most modes within a factor of about 3
+    assert result["P"]["below"]["0.3"] < result["free_coordinates"] // 2
 
 
 def test_oracle_without_correction_is_the_plain_join(study):
