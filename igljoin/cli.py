@@ -608,7 +608,9 @@ def _cmd_join(parser, args) -> int:
     finally:
         if status is not None:
             status.close()
-    files = sorted(p.name for p in Path(args.out).iterdir())
+    from .outputs import MANIFEST, read_manifest
+
+    files = sorted(set(read_manifest(args.out)) - {MANIFEST})  # igljoin's files only
     if args.json:
         _print_json({"out": args.out, "files": files, "summary": row})
         return 0
@@ -644,8 +646,28 @@ def _cmd_batch(parser, args) -> int:
         for row in summary.rows:
             if row["status"] != "ok":
                 print(f"  {row['name']}: failed at {row['step']}: {row['error_message']}")
-        print(f"summary: {summary.files['summary_csv']}")
-    if not summary.ok:
+        if summary.files:
+            print(f"summary: {summary.files['summary_csv']}")
+    if summary.summary_error is not None:
+        print(
+            f"{PROG}: error: the summary could not be written ({summary.summary_error}); "
+            "the rows above are its only copy",
+            file=sys.stderr,
+        )
+    if summary.unrecorded:
+        print(
+            f"{PROG}: error: the outcome of {len(summary.unrecorded)} case(s) could not be "
+            f"written into their folders: {', '.join(summary.unrecorded)}; free space and "
+            "rerun with --resume",
+            file=sys.stderr,
+        )
+    if summary.summary_error is not None or summary.unrecorded:
+        if args.json:
+            return 1
+        for row in summary.rows:
+            if row["status"] == "ok":
+                print(f"  {row['name']}: ok")
+    if not summary.ok or summary.summary_error is not None:
         print(f"{PROG}: {summary.message()}", file=sys.stderr)
         return 1
     return 0

@@ -64,3 +64,7 @@ def missing_extra(package: str, extra: str, feature: str) -> MissingExtraError:
         f"{feature} needs the optional package '{package}', which is not installed; "
         f"install it with: pip install 'igljoin[{extra}]'"
     )
+
+
+class OutputError(IgljoinError):
+    """An output path would replace or delete something igljoin did not write."""

@@ -11,18 +11,27 @@ case in a worker and writes, for a case named ``NAME``::
     OUT/NAME/error.json      instead of the above when the case failed
     OUT/summary.csv, OUT/summary.json   one row per case
 
-Nothing is lost:
+Nothing is lost (``docs/pipelines.md``, "Output folders"):
 
-* a case is written into a hidden temporary folder next to its final one
-  (``OUT/.NAME.tmp-XXXXXXXX``) and renamed into place with :func:`os.replace`
-  only when complete; an existing output is first renamed aside and removed
-  after the swap. Stale temporary folders of a killed run are removed by the
-  next run;
+* igljoin never deletes or replaces a file it did not write. A case is
+  written into a marked staging folder next to its final one
+  (``OUT/.NAME.tmp-XXXXXXXX``) and its files are moved into ``OUT/NAME`` only
+  when complete, beside whatever else is there; the folder's manifest
+  ``.igljoin-manifest.json`` lists igljoin's files with their SHA-256, and
+  only those are ever replaced or removed (:mod:`igljoin.outputs`). Staging
+  folders a killed run left are removed by the next run (only marked ones);
 * inputs are only opened read-only;
 * a failing case writes ``error.json`` (type, message, step) and the batch
-  goes on;
-* ``resume=True`` skips cases whose ``report.json`` lists the same input
-  hashes (SHA-256), effective spec, igljoin version and output hashes as now.
+  goes on; a case whose outputs cannot all be written (a failed weld, a full
+  disk) is failed, never "ok";
+* local workers die with the batch process and publish only while their
+  batch holds the output folder's lock; a worker that dies is replaced and
+  the cases it had not started run on a new pool;
+* ``resume=True`` skips a case only if its manifest, report and every output
+  still have the hashes recorded at write time and the report's input
+  hashes, effective spec and igljoin version are the current ones;
+* the summary is kept in memory and written at the end; cases whose outcome
+  could not be written anywhere are listed in :attr:`BatchSummary.unrecorded`.
 
 Outputs are deterministic: rerunning, resuming after a kill at any moment or
 running on dask gives byte-identical files, except ``*/timings.json`` and the
@@ -40,9 +49,9 @@ import json
 import logging
 import multiprocessing
 import os
-import re
 import secrets
 import shutil
+import stat
 import sys
 import time
 import traceback
@@ -54,12 +63,22 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from .atomic import atomic_write_text, fsync_dir
+from .atomic import atomic_write_text
 from .boundary import Curve, select_curve
-from .errors import IgljoinError, OptionsError, SpecError, WeldError, missing_extra
+from .errors import IgljoinError, OptionsError, OutputError, SpecError, missing_extra
 from .io import read_mesh
 from .join import JoinSolver
-from .spec import CaseSpec, discover_cases, file_sha256, load_case
+from .outputs import (
+    MANIFEST,
+    STAGING_MARK,
+    check_folder,
+    file_sha256,
+    make_staging,
+    publish,
+    read_manifest,
+    remove_stale_staging,
+)
+from .spec import CaseSpec, discover_cases, load_case
 
 __all__ = [
     "BLAS_ENV",
@@ -123,8 +142,10 @@ ROW_FIELDS = (
     "time_seconds",
 )
 
-_STALE_DIR = re.compile(r"^\..+\.(tmp|old)-[0-9a-f]{8}$")
-_STALE_FILE = re.compile(r"^\..+\.tmp-[0-9a-f]{8}(\.[A-Za-z0-9]+)?$")
+#: Every file name a case folder may receive (checked before a case runs).
+CASE_FILES = ("guest.ply", "merged.ply", REPORT, TIMINGS, ERROR, SNAPSHOT)
+#: Outputs a successful case must have (``resume`` redoes a case missing one).
+REQUIRED_OUTPUTS = ("guest.ply", "merged.ply")
 
 
 # --------------------------------------------------------------------------- one case
@@ -290,11 +311,7 @@ def _write_outputs(
     t = time.perf_counter()
     step.name = "save"
     warnings: list[str] = []
-    try:
-        paths = result.save(tmp)
-    except WeldError as exc:
-        warnings.append(f"merged.ply not written: {exc}")
-        paths = result.save(tmp, merged=False)
+    paths = result.save(tmp)  # a WeldError fails the case at step "save": merged.ply is required
     report = json.loads(paths["report"].read_text(encoding="utf-8"))
     timings["solver"] = report.pop("timings", {})
     metrics = report.get("metrics", {})
@@ -325,39 +342,6 @@ def _write_outputs(
     return report, timings
 
 
-def _temp_dir(final: Path, kind: str = "tmp") -> Path:
-    for _ in range(100):
-        tmp = final.with_name(f".{final.name}.{kind}-{secrets.token_hex(4)}")
-        try:
-            tmp.mkdir()
-        except FileExistsError:
-            continue
-        return tmp
-    raise FileExistsError(f"cannot create a temporary folder beside {final}")
-
-
-def _publish(tmp: Path, final: Path) -> None:
-    """Move the complete folder ``tmp`` to ``final``, replacing an old one safely."""
-    for f in tmp.iterdir():
-        if f.is_file():
-            fd = os.open(f, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
-    old = None
-    if final.exists() or final.is_symlink():
-        old = final.with_name(f".{final.name}.old-{secrets.token_hex(4)}")
-        os.replace(final, old)
-    os.replace(tmp, final)
-    fsync_dir(final.parent)
-    if old is not None:
-        if old.is_dir() and not old.is_symlink():
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            old.unlink(missing_ok=True)
-
-
 def _error_record(name: str, exc: BaseException, step: str, inputs: dict | None) -> dict:
     return {
         "case": name,
@@ -370,38 +354,64 @@ def _error_record(name: str, exc: BaseException, step: str, inputs: dict | None)
 
 
 def _write_failure(final: Path, record: dict, timings: dict) -> None:
-    tmp = _temp_dir(final)
+    tmp = make_staging(final)
     try:
         atomic_write_text(tmp / ERROR, _json_text(record))
         atomic_write_text(tmp / TIMINGS, _json_text(timings))
-        _publish(tmp, final)
+        publish(tmp, final, exclusive=True)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
 
 
-def _worker_failure(final: Path, name: str, exc: BaseException) -> dict:
-    """Record a case whose worker died: error.json, unless a previous output is there.
+def _empty_staging(tmp: Path) -> None:
+    """Remove what a failed attempt wrote into a staging folder (its mark stays)."""
+    for p in tmp.iterdir():
+        if p.name == STAGING_MARK:
+            continue
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
 
-    A previous complete output is left untouched (the case did not run, so it
-    is not wrong); the summary row reports the failure either way.
+
+def _worker_failure(final: Path, name: str, exc: BaseException, *, step: str = "worker") -> dict:
+    """Record a case whose worker died or whose folder could not be written.
+
+    ``error.json`` is written unless a previous complete output is there (the
+    case did not run, so that output is not wrong); the summary row reports
+    the failure either way. If even ``error.json`` cannot be written (a full
+    disk), the row says so and carries ``_unrecorded=True``.
     """
-    record = _error_record(name, exc, "worker", None)
-    record["message"] = (
-        f"the worker running this case died or was lost ({exc!r}); rerun the batch with "
-        "--resume to retry it"
-    )
+    record = _error_record(name, exc, step, None)
+    if step == "worker":
+        record["message"] = (
+            f"the worker running this case died or was lost ({exc!r}); rerun the batch with "
+            "--resume to retry it"
+        )
+    elif isinstance(exc, OSError):
+        record["message"] = _one_line_os(exc)
+    unrecorded = False
     if not (final / REPORT).is_file():
-        _write_failure(final, record, {"total": None})
+        try:
+            _write_failure(final, record, {"total": None})
+        except (IgljoinError, OSError) as write_exc:
+            unrecorded = True
+            record["message"] += f" (not recorded in {final}: {_one_line_os_or(write_exc)})"
     row = dict.fromkeys(ROW_FIELDS)
     row.update(
         name=name,
         status="failed",
-        step="worker",
+        step=step,
         error_type=record["type"],
         error_message=record["message"],
     )
+    row["_unrecorded"] = unrecorded
     return row
+
+
+def _one_line_os_or(exc: BaseException) -> str:
+    return _one_line_os(exc) if isinstance(exc, OSError) else str(exc)
 
 
 def run_case(
@@ -411,16 +421,21 @@ def run_case(
     snapshots: bool = False,
     record_errors: bool = True,
     progress: Any = None,
+    publish_guard: Any = None,
 ) -> dict:
-    """Run one case and write its output folder atomically.
+    """Run one case and write its output folder (see ``docs/pipelines.md``).
 
     Parameters
     ----------
     case : str, os.PathLike or CaseSpec
         A case folder (read with :func:`igljoin.spec.load_case`) or a spec.
     out : str or os.PathLike
-        The case's output folder; its parent is created if missing. It is
-        replaced only once the new output is complete.
+        The case's output folder; its parent is created if missing. The
+        case's files are written into a staging folder beside it and moved in
+        only once complete; files in ``out`` that igljoin did not write are
+        never touched, and a file of the same name as one of its outputs that
+        igljoin did not write is refused (:class:`~igljoin.errors.OutputError`)
+        before the case runs.
     snapshots : bool, optional
         Also render ``snapshot.png`` with :func:`igljoin.viz.render` (skipped
         with a warning in the report if igljoin.viz is not available).
@@ -433,6 +448,10 @@ def run_case(
     progress : callable, optional
         Called with an :class:`igljoin.SolveProgress` after every iteration
         of the join (see :meth:`igljoin.JoinSolver.solve`).
+    publish_guard : callable, optional
+        Called just before the outputs are moved into ``out``; if it raises,
+        nothing is published (a batch worker checks that its batch still
+        holds the output folder's lock).
 
     Returns
     -------
@@ -444,16 +463,20 @@ def run_case(
     ------
     OSError
         If the output folder cannot be written.
+    OutputError
+        If ``out`` is a file, or holds a file named like one of the case's
+        outputs that igljoin did not write.
     IgljoinError
         Errors of the case, only with ``record_errors=False``.
     """
     final = Path(out)
+    check_folder(final, CASE_FILES, what="output folder")
     final.parent.mkdir(parents=True, exist_ok=True)
     step = _Step()
     start = time.perf_counter()
     name = case.name if isinstance(case, CaseSpec) else Path(case).name
     inputs = None
-    tmp = _temp_dir(final)
+    tmp = make_staging(final)
     try:
         try:
             spec = case if isinstance(case, CaseSpec) else load_case(case)
@@ -467,8 +490,7 @@ def run_case(
         except Exception as exc:  # any failure of the case is recorded, not raised
             if not record_errors:
                 raise
-            shutil.rmtree(tmp, ignore_errors=True)
-            tmp.mkdir()
+            _empty_staging(tmp)
             record = _error_record(name, exc, step.name, inputs)
             atomic_write_text(tmp / ERROR, _json_text(record))
             detail = {
@@ -476,7 +498,9 @@ def run_case(
                 "traceback": "".join(traceback.format_exception(exc)),
             }
             atomic_write_text(tmp / TIMINGS, _json_text(detail))
-        _publish(tmp, final)
+        if publish_guard is not None:
+            publish_guard()
+        publish(tmp, final, exclusive=True)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
@@ -486,11 +510,24 @@ def run_case(
 # --------------------------------------------------------------------------- rows and summary
 
 
+#: Largest JSON file igljoin reads back from an output folder (a report is ~10 kB).
+_MAX_JSON_BYTES = 64 << 20
+
+
 def _load_json(path: Path) -> dict | None:
+    """A JSON object read from ``path``, or None if it is not a sound igljoin file.
+
+    Only regular files are opened (a FIFO or device would block), at most
+    :data:`_MAX_JSON_BYTES`; deep nesting (``RecursionError``) counts as
+    unreadable.
+    """
     try:
+        st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode) or st.st_size > _MAX_JSON_BYTES:
+            return None
         with open(path, encoding="utf-8") as fh:
             data = json.load(fh)
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
     return data if isinstance(data, dict) else None
 
@@ -574,6 +611,9 @@ def case_row(folder: str | os.PathLike, *, name: str | None = None) -> dict:
 def write_summary(out_dir: str | os.PathLike, rows: list[dict]) -> tuple[Path, Path]:
     """Write ``summary.csv`` and ``summary.json`` atomically (rows sorted by name).
 
+    Both are staged and moved into ``out_dir`` together and recorded in its
+    manifest; a foreign file of either name is refused (:class:`OutputError`).
+
     Returns
     -------
     (pathlib.Path, pathlib.Path)
@@ -595,9 +635,15 @@ def write_summary(out_dir: str | os.PathLike, rows: list[dict]) -> tuple[Path, P
         "failed_cases": failed,
         "rows": rows,
     }
-    csv_path = atomic_write_text(out / SUMMARY_CSV, buf.getvalue())
-    json_path = atomic_write_text(out / SUMMARY_JSON, _json_text(doc))
-    return csv_path, json_path
+    tmp = make_staging(out)
+    try:
+        atomic_write_text(tmp / SUMMARY_CSV, buf.getvalue())
+        atomic_write_text(tmp / SUMMARY_JSON, _json_text(doc))
+        publish(tmp, out, exclusive=False)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    return out / SUMMARY_CSV, out / SUMMARY_JSON
 
 
 @dataclass
@@ -616,7 +662,13 @@ class BatchSummary:
     seconds : float
         Wall time of the batch.
     files : dict of str to pathlib.Path
-        ``summary_csv`` and ``summary_json``.
+        ``summary_csv`` and ``summary_json`` (empty if they could not be
+        written, see ``summary_error``).
+    unrecorded : list of str
+        Cases whose outcome could not be written into their folder (e.g. a
+        full disk): their row in :attr:`rows` is the only record.
+    summary_error : str or None
+        Why ``summary.csv``/``summary.json`` could not be written, if so.
     """
 
     out_dir: Path
@@ -625,6 +677,8 @@ class BatchSummary:
     skipped: list = field(default_factory=list)
     seconds: float = 0.0
     files: dict = field(default_factory=dict)
+    unrecorded: list = field(default_factory=list)
+    summary_error: str | None = None
 
     @property
     def n_cases(self) -> int:
@@ -660,6 +714,8 @@ class BatchSummary:
             "skipped": list(self.skipped),
             "seconds": self.seconds,
             "files": {k: str(v) for k, v in self.files.items()},
+            "unrecorded": list(self.unrecorded),
+            "summary_error": self.summary_error,
             "rows": self.rows,
         }
 
@@ -674,11 +730,25 @@ def _json_round_trip(data: Any) -> Any:
 def is_current(case_dir: str | os.PathLike, out: str | os.PathLike, *, snapshots=False) -> bool:
     """Whether ``out`` holds a complete output of ``case_dir`` for its current inputs.
 
-    True when ``report.json`` exists and its input hashes, effective spec and
-    igljoin version equal the current ones, every output it lists has the
-    recorded SHA-256, and (with ``snapshots``) ``snapshot.png`` exists.
+    True when the folder's manifest (written when the outputs were published)
+    lists ``report.json`` and every file still has the SHA-256 recorded
+    there, so that the report is the one igljoin wrote; the report's input
+    hashes, effective spec and igljoin version equal the current ones; the
+    outputs it lists include ``guest.ply`` and ``merged.ply`` and match the
+    manifest; and (with ``snapshots``) ``snapshot.png`` is among them.
+    Anything else, including a report that cannot be read, means "redo".
     """
     out = Path(out)
+    manifest = read_manifest(out)
+    if REPORT not in manifest or ERROR in manifest:
+        return False
+    for fname, digest in manifest.items():
+        f = out / fname
+        try:
+            if digest is None or f.is_symlink() or not f.is_file() or file_sha256(f) != digest:
+                return False
+        except OSError:
+            return False
     report = _load_json(out / REPORT)
     if report is None or report.get("igljoin_version") != __version__:
         return False
@@ -691,13 +761,11 @@ def is_current(case_dir: str | os.PathLike, out: str | os.PathLike, *, snapshots
     except (IgljoinError, OSError):
         return False
     outputs = report.get("outputs")
-    if not isinstance(outputs, dict) or not outputs:
+    if not isinstance(outputs, dict) or not set(REQUIRED_OUTPUTS) <= set(outputs):
         return False
-    for fname, digest in outputs.items():
-        f = out / fname
-        if not f.is_file() or file_sha256(f) != digest:
-            return False
-    if snapshots and not (out / SNAPSHOT).is_file():
+    if any(manifest.get(fname) != digest for fname, digest in outputs.items()):
+        return False
+    if snapshots and SNAPSHOT not in outputs:
         return False
     return True
 
@@ -705,8 +773,38 @@ def is_current(case_dir: str | os.PathLike, out: str | os.PathLike, *, snapshots
 # --------------------------------------------------------------------------- executors
 
 
-def _init_worker() -> None:
+def _die_with_parent(parent_pid: int) -> None:
+    """End this worker process as soon as the process that started it is gone.
+
+    Two mechanisms, so that a SIGKILL of the batch never leaves workers
+    running (and writing): on Linux the kernel sends SIGKILL at the parent's
+    death (``prctl(PR_SET_PDEATHSIG)``); everywhere, a daemon thread polls
+    the parent id every 0.1 s and calls :func:`os._exit` when it changes.
+    """
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(Exception):
+            import ctypes
+            import signal
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+    if os.getppid() != parent_pid:  # the parent died before the line above ran
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(0.1)
+        os._exit(1)
+
+    import threading
+
+    threading.Thread(target=watch, name="igljoin-parent-watch", daemon=True).start()
+
+
+def _init_worker(parent_pid: int | None = None) -> None:
     """Initializer of local worker processes.
+
+    The worker ends when the batch process does (:func:`_die_with_parent`).
 
     One BLAS/OpenMP thread for libraries loaded from now on (numpy's BLAS is
     already capped by the environment the worker was started with, see
@@ -714,6 +812,8 @@ def _init_worker() -> None:
     where polyscope's C++ code prints) goes to standard error, so that the
     batch's own stdout (``--json``) stays clean.
     """
+    if parent_pid is not None:
+        _die_with_parent(parent_pid)
     os.environ.update(BLAS_ENV)
     with contextlib.suppress(Exception):
         from threadpoolctl import threadpool_limits
@@ -724,9 +824,39 @@ def _init_worker() -> None:
         os.dup2(2, 1)
 
 
+def _lock_guard(lock_path: str | None, token: str | None):
+    """A ``publish_guard`` that refuses to publish unless the batch still holds its lock.
+
+    The batch writes a random token into its lock file; a worker whose batch
+    was killed (and whose output folder may now be written by another batch)
+    finds a different token or no lock file and publishes nothing.
+    """
+    if lock_path is None:
+        return None
+
+    def guard() -> None:
+        try:
+            with open(lock_path, encoding="utf-8") as fh:
+                held = fh.read(256).strip()
+        except OSError:
+            held = None
+        if held != token:
+            raise OutputError(
+                f"the batch that started this case no longer holds {lock_path}; "
+                "its outputs were not published"
+            )
+
+    return guard
+
+
 def _case_task(payload: dict) -> dict:
     """Executor task: run one case (module-level so that workers can import it)."""
-    return run_case(payload["case"], payload["out"], snapshots=payload["snapshots"])
+    return run_case(
+        payload["case"],
+        payload["out"],
+        snapshots=payload["snapshots"],
+        publish_guard=_lock_guard(payload.get("lock"), payload.get("token")),
+    )
 
 
 @contextlib.contextmanager
@@ -818,7 +948,9 @@ def _executor(
     # spawn, not fork (BLAS pools, EGL contexts) nor forkserver (its server process
     # is shared by the whole program and keeps the environment it started with)
     context = multiprocessing.get_context("spawn")
-    ex = cf.ProcessPoolExecutor(max_workers=n, mp_context=context, initializer=_init_worker)
+    ex = cf.ProcessPoolExecutor(
+        max_workers=n, mp_context=context, initializer=_init_worker, initargs=(os.getpid(),)
+    )
     try:
         yield ex
     except BaseException:  # interrupted: do not start the cases still waiting
@@ -830,26 +962,24 @@ def _executor(
 # --------------------------------------------------------------------------- batch
 
 
-def _remove_stale(out_dir: Path) -> None:
-    """Remove temporary and set-aside folders a killed run left behind."""
-    for p in out_dir.iterdir():
-        if p.is_symlink():
-            continue
-        if p.is_dir() and _STALE_DIR.match(p.name):
-            shutil.rmtree(p, ignore_errors=True)
-        elif p.is_file() and _STALE_FILE.match(p.name):
-            p.unlink(missing_ok=True)
-
-
 @contextlib.contextmanager
-def _lock(out_dir: Path) -> Iterator[None]:
-    """Refuse to run two batches into one output folder at the same time."""
+def _lock(out_dir: Path) -> Iterator[tuple[Path, str]]:
+    """Refuse to run two batches into one output folder at the same time.
+
+    Yields the lock file and a random token written into it: workers publish
+    only while the file still holds that token (:func:`_lock_guard`).
+    """
+    token = secrets.token_hex(16)
+    path = out_dir / LOCK
     try:
         import fcntl
     except ImportError:  # pragma: no cover - not POSIX
-        yield
+        yield path, token
         return
-    path = out_dir / LOCK
+    if path.is_symlink() or (path.exists() and not path.is_file()):
+        raise OutputError(
+            f"{path} is not a regular file; it is igljoin's batch lock: remove it and run again"
+        )
     with open(path, "a+") as fh:
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -859,7 +989,11 @@ def _lock(out_dir: Path) -> Iterator[None]:
                 "to finish or choose another output folder"
             ) from None
         try:
-            yield
+            fh.seek(0)
+            fh.truncate()
+            fh.write(token + "\n")
+            fh.flush()
+            yield path, token
         finally:
             path.unlink(missing_ok=True)  # still locked by us: nobody else can be using it
 
@@ -952,9 +1086,11 @@ def run_batch(
     if dupes:
         raise SpecError(f"{cases_dir}: case names repeat ({', '.join(dupes)})")
     out = Path(out_dir)
+    check_folder(out, (SUMMARY_CSV, SUMMARY_JSON), what="output folder")
     out.mkdir(parents=True, exist_ok=True)
     summary = BatchSummary(out_dir=out)
-    with _lock(out):
+    local_pool = executor is None and scheduler is None and dask_local is None and workers != 0
+    with _lock(out) as (lock_path, token):
         _remove_stale(out)
         todo = []
         for case in cases:
@@ -963,50 +1099,140 @@ def run_batch(
             else:
                 todo.append(case)
         bar = _progress(len(cases), progress)
-        failed = 0
         if bar is not None and summary.skipped:
             bar.update(len(summary.skipped))
         rows: dict[str, dict] = {}
+        guard = {"lock": str(lock_path), "token": token}
         try:
             if todo:
-                with _executor(len(todo), executor, workers, scheduler, dask_local) as ex:
-                    futures = {}
-                    with _blas_env():
-                        for case in todo:
-                            payload = {
-                                "case": str(case),
-                                "out": str(out / case.name),
-                                "snapshots": bool(snapshots),
-                            }
-                            futures[ex.submit(_case_task, payload)] = case
-                    for fut in cf.as_completed(futures):
-                        case = futures[fut]
-                        try:
-                            row = fut.result()
-                        except (KeyboardInterrupt, SystemExit):
-                            raise
-                        except BaseException as exc:  # a worker died or the task was lost
-                            row = _worker_failure(out / case.name, case.name, exc)
-                        rows[case.name] = row
-                        summary.ran.append(case.name)
-                        failed += row["status"] != "ok"
-                        if bar is not None:
-                            bar.set_postfix(
-                                done=len(rows) + len(summary.skipped),
-                                failed=failed,
-                                remaining=len(todo) - len(rows),
-                                refresh=False,
-                            )
-                            bar.update(1)
+                run = _Run(out, snapshots, guard, rows, summary, bar, len(todo))
+                if local_pool:
+                    run.local(todo, workers)
+                else:
+                    with _executor(len(todo), executor, workers, scheduler, dask_local) as ex:
+                        run.round(ex, todo, isolated=True)
         finally:
             if bar is not None:
                 bar.close()
+        _remove_stale(out)  # what a dead worker left (its staging folder)
         for case in cases:
             if case.name not in rows:
                 rows[case.name] = case_row(out / case.name, name=case.name)
         summary.rows = sorted(rows.values(), key=lambda r: r["name"])
-        csv_path, json_path = write_summary(out, summary.rows)
-    summary.files = {"summary_csv": csv_path, "summary_json": json_path}
+        try:
+            csv_path, json_path = write_summary(out, summary.rows)
+            summary.files = {"summary_csv": csv_path, "summary_json": json_path}
+        except OSError as exc:
+            summary.summary_error = _one_line_os(exc)
     summary.ran.sort()
+    summary.unrecorded.sort()
     summary.seconds = time.perf_counter() - start
     return summary
+
+
+class _Run:
+    """The cases of one batch on executors: results, retries, rows, progress."""
+
+    def __init__(self, out, snapshots, guard, rows, summary, bar, total):
+        self.out, self.snapshots, self.guard = out, snapshots, guard
+        self.rows, self.summary, self.bar, self.total = rows, summary, bar, total
+        self.failed = 0
+
+    def local(self, todo: list, workers: int | None) -> None:
+        """Run on local process pools; a dead worker's pool is replaced.
+
+        When a worker dies (killed, out of memory), the pool breaks and every
+        case still in it fails with ``BrokenProcessPool``. The cases that had
+        not started (no staging folder of theirs exists) are queued again on a
+        new pool; the ones that had started are retried one at a time, each
+        alone on its own pool, so that the case whose worker dies again is
+        known and recorded as failed with the reason, and the others succeed.
+        """
+        queue, suspects = list(todo), []
+        while queue or suspects:
+            if queue:
+                batch, queue, isolated = queue, [], False
+            else:
+                batch, isolated = [suspects.pop(0)], True
+            with _executor(len(batch), None, workers, None, None) as ex:
+                broken = self.round(ex, batch, isolated=isolated)
+            for case in broken:
+                started = _staging_of(self.out, case.name)
+                for p in started:
+                    shutil.rmtree(p, ignore_errors=True)
+                (suspects if started else queue).append(case)
+
+    def round(self, ex, batch: list, *, isolated: bool) -> list:
+        """Submit ``batch`` to ``ex`` and record the results; return the cases to retry."""
+        futures = {}
+        with _blas_env():
+            for case in batch:
+                payload = {
+                    "case": str(case),
+                    "out": str(self.out / case.name),
+                    "snapshots": bool(self.snapshots),
+                    **self.guard,
+                }
+                futures[ex.submit(_case_task, payload)] = case
+        retry = []
+        for fut in cf.as_completed(futures):
+            case = futures[fut]
+            try:
+                row = fut.result()
+            except (KeyboardInterrupt, SystemExit):
+                raise
+            except cf.process.BrokenProcessPool as exc:
+                if not isolated:
+                    retry.append(case)
+                    continue
+                row = self.lost(case, exc)
+            except (IgljoinError, OSError) as exc:  # the case's folder could not be written
+                row = self.lost(case, exc, step="publish")
+            except BaseException as exc:  # a worker died or the task was lost
+                row = self.lost(case, exc)
+            self.record(case, row)
+        return retry
+
+    def lost(self, case, exc: BaseException, step: str = "worker") -> dict:
+        row = _worker_failure(self.out / case.name, case.name, exc, step=step)
+        if row.pop("_unrecorded", False):
+            self.summary.unrecorded.append(case.name)
+        return row
+
+    def record(self, case, row: dict) -> None:
+        self.rows[case.name] = row
+        self.summary.ran.append(case.name)
+        self.failed += row["status"] != "ok"
+        if self.bar is not None:
+            self.bar.set_postfix(
+                done=len(self.rows) + len(self.summary.skipped),
+                failed=self.failed,
+                remaining=self.total - len(self.rows),
+                refresh=False,
+            )
+            self.bar.update(1)
+
+
+def _staging_of(out: Path, name: str) -> list[Path]:
+    """Marked staging folders of case ``name`` in ``out`` (left when its worker died)."""
+    prefix = f".{name}.tmp-"
+    return [
+        p
+        for p in out.iterdir()
+        if p.name.startswith(prefix) and p.is_dir() and (p / STAGING_MARK).is_file()
+    ]
+
+
+def _remove_stale(out: Path) -> None:
+    """Remove staging folders a killed run or a dead worker left in ``out`` and its cases."""
+    remove_stale_staging(out)
+    for p in out.iterdir():
+        if p.is_dir() and not p.is_symlink() and (p / MANIFEST).is_file():
+            remove_stale_staging(p)
+
+
+def _one_line_os(exc: OSError) -> str:
+    text = exc.strerror or str(exc)
+    if exc.filename is not None and str(exc.filename) not in text:
+        text += f": {exc.filename}"
+    return text

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import dataclasses
 import errno
-import hashlib
 import math
 import os
 import sys
@@ -46,6 +45,7 @@ from .boundary import Curve
 from .errors import OptionsError, SpecError
 from .io import SUPPORTED_SUFFIXES
 from .options import JoinOptions
+from .outputs import file_sha256
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -287,15 +287,6 @@ class CaseSpec:
 
 
 # --------------------------------------------------------------------------- helpers
-
-
-def file_sha256(path: str | os.PathLike) -> str:
-    """Hex SHA-256 of a file's bytes (read-only, in 1 MiB chunks)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def _curve_json(c: Curve) -> dict:

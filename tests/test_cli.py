@@ -139,6 +139,7 @@ def test_join_files(patch_files, tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "converged: True" in proc.stdout and "crease mean" in proc.stdout
     assert sorted(p.name for p in out.iterdir()) == [
+        ".igljoin-manifest.json",  # the list of igljoin's own files (docs/pipelines.md)
         "guest.ply",
         "merged.ply",
         "report.json",

@@ -56,16 +56,36 @@ def _without_time(path: Path) -> object:
     return doc
 
 
+MANIFEST = ".igljoin-manifest.json"
+VARYING = ("timings.json", MANIFEST)  # wall times, and the manifest that holds their hashes
+
+
+def _manifest_without_times(path: Path) -> dict:
+    files = json.loads(path.read_text(encoding="utf-8"))["files"]
+    return {k: v for k, v in files.items() if k not in ("timings.json", *SUMMARIES)}
+
+
+SUMMARIES = ("summary.csv", "summary.json")
+
+
 def assert_same_outputs(a: Path, b: Path) -> None:
-    """Byte-identical outputs except timings.json and the time_seconds summary field."""
-    fa = {k: v for k, v in file_hashes(a).items() if not k.endswith("timings.json")}
-    fb = {k: v for k, v in file_hashes(b).items() if not k.endswith("timings.json")}
-    summaries = {"summary.csv", "summary.json"}
+    """Byte-identical outputs except wall times: timings.json, time_seconds, their hashes."""
+    fa = {k: v for k, v in file_hashes(a).items() if not k.endswith(VARYING)}
+    fb = {k: v for k, v in file_hashes(b).items() if not k.endswith(VARYING)}
     assert sorted(fa) == sorted(fb)
-    differing = [k for k in fa if k not in summaries and fa[k] != fb[k]]
+    differing = [k for k in fa if k not in SUMMARIES and fa[k] != fb[k]]
     assert differing == []
-    for name in summaries:
+    for name in SUMMARIES:
         assert _without_time(a / name) == _without_time(b / name)
+    ma = sorted(p.relative_to(a) for p in a.rglob(MANIFEST))
+    assert ma == sorted(p.relative_to(b) for p in b.rglob(MANIFEST))
+    for rel in ma:
+        assert _manifest_without_times(a / rel) == _manifest_without_times(b / rel)
+
+
+def hidden(root: Path) -> list[Path]:
+    """Hidden entries under ``root`` other than igljoin's manifests (temporary files, locks)."""
+    return [p for p in root.rglob(".*") if p.name != MANIFEST]
 
 
 @pytest.fixture(scope="module")
@@ -155,12 +175,12 @@ def test_good_cases_outputs_are_complete(local_run, cases):
     for case in sorted(cases.iterdir()):
         folder = out / case.name
         if case.name in BAD:
-            assert sorted(p.name for p in folder.iterdir()) == ["error.json", "timings.json"]
+            assert sorted(p.name for p in folder.iterdir()) == [MANIFEST, "error.json", "timings.json"]
             error = json.loads((folder / "error.json").read_text())
             assert set(error) == {"case", "igljoin_version", "type", "message", "step", "inputs"}
             continue
         names = sorted(p.name for p in folder.iterdir())
-        assert names == ["guest.ply", "merged.ply", "report.json", "timings.json"]
+        assert names == [MANIFEST, "guest.ply", "merged.ply", "report.json", "timings.json"]
         report = json.loads((folder / "report.json").read_text())
         assert report["case"] == case.name and report["igljoin_version"] == igljoin.__version__
         for role, entry in report["inputs"].items():
@@ -182,7 +202,7 @@ def test_good_cases_outputs_are_complete(local_run, cases):
     assert stiff["inputs"]["stiffness"]["file"] == "stiffness.npy"
     coarse = json.loads((out / "partial_patch-coarse" / "report.json").read_text())
     assert coarse["resample"]["boundary_deviation"] < 1e-9  # pinned boundary: rounding only
-    assert not [p for p in out.rglob(".*")]  # no temporary files, no lock left
+    assert not hidden(out)  # no temporary files, no lock left
 
 
 def test_inputs_are_untouched(local_run, cases, input_hashes):
@@ -233,7 +253,7 @@ def test_sigkill_then_resume_equals_an_uninterrupted_run(local_run, cases, input
     assert set(doc["skipped"]) == ok_before  # finished cases were not run again
     assert set(doc["ran"]) == {p.name for p in cases.iterdir()} - ok_before
     assert_same_outputs(reference, out)
-    assert not [p for p in out.rglob(".*")]  # no temporary folders or files left
+    assert not hidden(out)  # no temporary folders or files left
     assert file_hashes(cases) == input_hashes
 
 
@@ -270,7 +290,7 @@ def test_run_case_replaces_an_output_whole(cases, tmp_path):
     first = json.loads((out / "report.json").read_text())
     row = run_case(cases / "bad-mesh", out)  # a failure replaces the whole folder
     assert row["status"] == "failed" and row["step"] == "read"
-    assert sorted(p.name for p in out.iterdir()) == ["error.json", "timings.json"]
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "error.json", "timings.json"]
     run_case(cases / "open_strip-equal", out)
     assert json.loads((out / "report.json").read_text()) == first
     assert sorted(p.name for p in tmp_path.iterdir()) == ["one"]  # nothing set aside is left
