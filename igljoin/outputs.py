@@ -20,6 +20,7 @@ place by :func:`publish`.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -218,9 +219,16 @@ def publish(staging: Path, final: Path, *, exclusive: bool) -> dict[str, str]:
         finally:
             os.close(fd)
         hashes[name] = file_sha256(f)
+    created = not final.exists()
     final.mkdir(parents=True, exist_ok=True)
     owned = read_manifest(final)
-    _write_manifest(final, {**owned, **dict.fromkeys(names)})
+    try:
+        _write_manifest(final, {**owned, **dict.fromkeys(names)})
+    except OSError:
+        if created:  # leave no empty folder of ours behind (e.g. on a full disk)
+            with contextlib.suppress(OSError):
+                final.rmdir()
+        raise
     for name in names:
         os.replace(staging / name, final / name)
     fsync_dir(final)

@@ -1181,7 +1181,7 @@ class _Run:
                 row = fut.result()
             except (KeyboardInterrupt, SystemExit):
                 raise
-            except cf.process.BrokenProcessPool as exc:
+            except cf.BrokenExecutor as exc:  # BrokenProcessPool: a worker died
                 if not isolated:
                     retry.append(case)
                     continue
