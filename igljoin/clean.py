@@ -623,8 +623,14 @@ def clean(
         ("max_hole_edges", max_hole_edges, 3),
         ("min_component_faces", min_component_faces, 0),
     ):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-            raise MeshError(f"clean: {name}={value!r} must be an integer >= {low}")
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, np.integer))
+            or not low <= value <= _C_INT_MAX
+        ):
+            raise MeshError(
+                f"clean: {name}={_short(value)} must be an integer from {low} to {_C_INT_MAX:,}"
+            )
     if isinstance(sliver_ratio, bool) or not (
         isinstance(sliver_ratio, (int, float)) and 0 <= sliver_ratio < 1
     ):
@@ -843,6 +849,44 @@ def _kept_curve(
     return rolled[: end + 1].copy(), False, k
 
 
+#: Largest value a pymeshlab integer parameter takes (a C++ ``int``).
+_C_INT_MAX = 2**31 - 1
+#: Most remeshing iterations :func:`resample` runs (each one passes over every face).
+MAX_RESAMPLE_ITERATIONS = 100
+#: Most faces :func:`resample` may produce, predicted from the area before any
+#: remeshing. Measured here: isotropic remeshing runs 20-45k faces x iterations per
+#: second on a loaded machine, so 2 M faces x 10 iterations is already minutes, and
+#: a tiny target edge (``--resample 0.0001``) would exhaust memory inside pymeshlab.
+MAX_RESAMPLE_FACES = 2_000_000
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else f"{text[:40]}... ({len(text)} characters)"
+
+
+def _check_resample_size(m: Mesh, target: float) -> None:
+    """Refuse a target edge whose remeshed mesh would exceed :data:`MAX_RESAMPLE_FACES`.
+
+    An equilateral triangle of edge ``t`` has area ``sqrt(3)/4 t^2``, so the
+    output has about ``area / (sqrt(3)/4 t^2)`` faces.
+    """
+    e1 = m.V[m.F[:, 1]] - m.V[m.F[:, 0]]
+    e2 = m.V[m.F[:, 2]] - m.V[m.F[:, 0]]
+    area = 0.5 * float(np.linalg.norm(np.cross(e1, e2), axis=1).sum())
+    predicted = area / (math.sqrt(3.0) / 4.0 * target * target)
+    if predicted > MAX_RESAMPLE_FACES:
+        edges, _, _ = _undirected_edges(m.F)
+        mean = float(np.linalg.norm(m.V[edges[:, 0]] - m.V[edges[:, 1]], axis=1).mean())
+        smallest = math.sqrt(area / (math.sqrt(3.0) / 4.0 * MAX_RESAMPLE_FACES))
+        raise MeshError(
+            f"resample: target_edge={target:.4g} would turn {m.name} (area {area:.4g}, mean "
+            f"edge {mean:.4g}) into about {predicted:,.0f} faces, more than the "
+            f"{MAX_RESAMPLE_FACES:,} allowed; choose a target edge of at least {smallest:.3g} "
+            "(or raise igljoin.clean.MAX_RESAMPLE_FACES)"
+        )
+
+
 def resample(
     mesh: Any,
     target_edge: float,
@@ -906,16 +950,22 @@ def resample(
         target = float("nan")
     if not (math.isfinite(target) and target > 0):
         raise MeshError(f"resample: target_edge={target_edge!r} must be a positive length")
-    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)):
-        raise MeshError(f"resample: iterations={iterations!r} must be a positive integer")
-    if iterations < 1:
-        raise MeshError(f"resample: iterations={iterations!r} must be a positive integer")
+    if (
+        isinstance(iterations, bool)
+        or not isinstance(iterations, (int, np.integer))
+        or not 1 <= iterations <= MAX_RESAMPLE_ITERATIONS
+    ):
+        raise MeshError(
+            f"resample: iterations={_short(iterations)} must be an integer from 1 to "
+            f"{MAX_RESAMPLE_ITERATIONS} (the default 10 is enough for an even mesh)"
+        )
     info = diagnose(m)
     if info["problems"]["non_manifold_edges"] or info["problems"]["degenerate_faces"]:
         raise MeshError(
             f"resample: {m.name} has non-manifold edges or degenerate faces; repair it with "
             "igljoin.clean.clean first (or cleanup = true in the case spec)"
         )
+    _check_resample_size(m, target)
     ml = _pymeshlab("igljoin.clean.resample (remeshing)")
     before = _edge_stats(m.V, m.F)
     loops_in = boundary_loops(m.F)

@@ -10,7 +10,27 @@ import numpy as np
 
 from .errors import OptionsError
 
-__all__ = ["JoinOptions"]
+__all__ = ["JoinOptions", "MAX_ITERATIONS", "MAX_WEIGHT"]
+
+#: Largest shape, stretch or smooth weight. The three terms are summed into one
+#: quadratic form factored in float64 (16 significant digits): a weight 10^6
+#: times the others already leaves the others at 1e-10 of the system, below the
+#: solver's tolerance, and far larger weights make the factorization blame the
+#: mesh (``shape_weight=1e308`` "converges" in 2 iterations with a 36° crease).
+#: Only the ratios of the weights matter, so a larger range is never needed.
+MAX_WEIGHT = 1e6
+WEIGHT_RANGE_WHY = (
+    "only the ratios of the weights matter, and beyond 1e6 the other terms fall below "
+    "float64 rounding in the solve"
+)
+#: Largest ``max_iterations`` (a few minutes of iterations on a paper-size join).
+MAX_ITERATIONS = 1_000_000
+
+
+def _short(value: Any) -> str:
+    """``repr`` of a value, cut to 60 characters (arrays and 400-digit integers stay short)."""
+    text = repr(value)
+    return text if len(text) <= 60 else f"{text[:40]}... ({len(text)} characters)"
 
 
 @dataclass(frozen=True)
@@ -27,7 +47,9 @@ class JoinOptions:
     stretch_weight : float
         Multiplier of the stiffness ``k_ij`` of the stretch term (Eq. 5–6).
     smooth_weight : float
-        ``w_J``, weight of the smooth-join term (Eq. 7).
+        ``w_J``, weight of the smooth-join term (Eq. 7). Each of the three
+        weights is 0 or at most :data:`MAX_WEIGHT` (1e6): only their ratios
+        matter, and beyond that the other terms fall below float64 rounding.
     smooth_mode : {"robust", "paper"}
         ``"paper"`` pulls one tangential point per seam vertex to a fixed
         target (Eq. 7 literally); ``"robust"`` (default) pulls every
@@ -57,7 +79,8 @@ class JoinOptions:
         Whether ``stiffness`` is per vertex or per face (``"auto"`` decides
         by its length; required when the guest has as many faces as vertices).
     max_iterations : int
-        Upper bound on local/global iterations (default 2000).
+        Upper bound on local/global iterations (default 2000, at most
+        :data:`MAX_ITERATIONS`, 1,000,000).
     tolerance : float
         Converged when the energy fell by less than ``tolerance`` times its
         value over the last five iterations and the last iteration moved no
@@ -106,8 +129,9 @@ class JoinOptions:
     linear_solver: str = "auto"
 
     def __post_init__(self) -> None:
-        for name in ("shape_weight", "stretch_weight", "smooth_weight", "smooth_radius"):
-            self._number(name, low=0.0)
+        for name in ("shape_weight", "stretch_weight", "smooth_weight"):
+            self._number(name, low=0.0, high=MAX_WEIGHT)
+        self._number("smooth_radius", low=0.0)
         if self.shape_weight == 0 and self.stretch_weight == 0:
             raise OptionsError(
                 "shape_weight and stretch_weight are both 0: nothing holds the guest's shape; "
@@ -133,9 +157,14 @@ class JoinOptions:
         if isinstance(acc, bool) or not isinstance(acc, (int, np.integer)) or not 0 <= acc <= 50:
             raise OptionsError(f"acceleration={acc!r} must be an integer from 0 to 50 (default 5)")
         it = self.max_iterations
-        if isinstance(it, bool) or not isinstance(it, (int, np.integer)) or it < 1:
+        if (
+            isinstance(it, bool)
+            or not isinstance(it, (int, np.integer))
+            or not 1 <= it <= MAX_ITERATIONS
+        ):
             raise OptionsError(
-                f"max_iterations={it!r} must be a positive integer (the default is 2000)"
+                f"max_iterations={_short(it)} must be an integer from 1 to {MAX_ITERATIONS:,} "
+                "(the default is 2000)"
             )
         for name, allowed in (
             ("smooth_mode", ("robust", "paper")),
@@ -144,10 +173,13 @@ class JoinOptions:
             ("initial_guess", ("extend", "rigid")),
             ("linear_solver", ("auto", "igl", "cholespy")),
         ):
-            if getattr(self, name) not in allowed:
+            value = getattr(self, name)
+            if not isinstance(value, str) or value not in allowed:
                 raise OptionsError(
-                    f"{name}={getattr(self, name)!r} is not one of {', '.join(map(repr, allowed))}"
+                    f"{name}={_short(value)} is not one of {', '.join(map(repr, allowed))}"
+                    + ("" if isinstance(value, str) else " (give one string)")
                 )
+            object.__setattr__(self, name, str(value))
         for name in ("smooth", "rotation_aware"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise OptionsError(f"{name}={getattr(self, name)!r} must be True or False")
@@ -166,20 +198,30 @@ class JoinOptions:
                 )
             object.__setattr__(self, "stiffness", k)
 
-    def _number(self, name: str, low: float, strict: bool = False) -> None:
+    def _number(
+        self, name: str, low: float, strict: bool = False, high: float | None = None
+    ) -> None:
         value = getattr(self, name)
         ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
             value, bool
         )
         if ok:
-            value = float(value)
+            try:
+                value = float(value)
+            except OverflowError:  # an integer beyond float range (10**400)
+                ok = False
+        if ok:
             ok = np.isfinite(value) and (value > low if strict else value >= low)
+            ok = ok and (high is None or value <= high)
         if not ok:
             bound = f"> {low:g}" if strict else f">= {low:g}"
+            if high is not None:
+                bound = f"from {low:g} to {high:g}"
             default = next(f.default for f in fields(self) if f.name == name)
             raise OptionsError(
-                f"{name}={getattr(self, name)!r} is out of range; it must be a finite number "
-                f"{bound} (the default is {default})"
+                f"{name}={_short(getattr(self, name))} is out of range; it must be a finite "
+                f"number {bound} (the default is {default})"
+                + (f"; {WEIGHT_RANGE_WHY}" if high is not None else "")
             )
         object.__setattr__(self, name, value)
 

@@ -312,12 +312,36 @@ def _is_int(v: Any) -> bool:
     return isinstance(v, int) and not isinstance(v, bool)
 
 
+#: Largest integer a spec may give (vertex, loop, iteration counts); beyond it is a typo.
+MAX_SPEC_INT = 2**31 - 1
+
+
 def _is_number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    try:
+        return math.isfinite(v)  # an int beyond float range raises OverflowError
+    except OverflowError:
+        return False
+
+
+def _big_int(value: Any, where: str, key: str) -> None:
+    if _is_int(value) and value > MAX_SPEC_INT:
+        raise SpecError(
+            f"{where}: {key} = {_short(value)} is too large; it must be at most "
+            f"{MAX_SPEC_INT:,}"
+        )
+
+
+def _short(value: Any) -> str:
+    """``repr`` of a value, cut to 60 characters (a 400-digit integer stays readable)."""
+    text = repr(value)
+    return text if len(text) <= 60 else f"{text[:40]}... ({len(text)} characters)"
 
 
 def _vertex(value: Any, where: str, key: str) -> Any:
     """A vertex index (int >= 0) or a point [x, y, z] from TOML."""
+    _big_int(value, where, key)
     if _is_int(value):
         if value < 0:
             raise SpecError(f"{where}: {key} = {value} must be a vertex index >= 0 or [x, y, z]")
@@ -344,6 +368,9 @@ def _curve(raw: Any, where: str, role: str) -> Curve:
     kw: dict[str, Any] = {}
     if "indices" in raw:
         idx = raw["indices"]
+        if isinstance(idx, list):
+            for i in idx:
+                _big_int(i, table, "indices")
         if not isinstance(idx, list) or not idx or not all(_is_int(i) and i >= 0 for i in idx):
             raise SpecError(
                 f"{table}: indices must be a non-empty list of vertex indices (integers >= 0)"
@@ -359,6 +386,7 @@ def _curve(raw: Any, where: str, role: str) -> Curve:
         if key in raw:
             kw[key] = _vertex(raw[key], table, key)
     if "loop" in raw:
+        _big_int(raw["loop"], table, "loop")
         if not _is_int(raw["loop"]) or raw["loop"] < 0:
             raise SpecError(f"{table}: loop = {raw['loop']!r} must be a loop index (integer >= 0)")
         kw["loop"] = int(raw["loop"])
@@ -398,11 +426,22 @@ def _check_resample_curve(spec: CaseSpec, where: str) -> None:
 def _inside(folder: Path, value: Any, where: str, key: str) -> Path:
     """Resolve a path named in a spec; it must stay inside ``folder`` (symlinks resolved)."""
     if not isinstance(value, str) or not value:
-        raise SpecError(f"{where}: {key} = {value!r} must be a file name (a string)")
+        raise SpecError(f"{where}: {key} = {_short(value)} must be a file name (a string)")
+    if "\0" in value:
+        raise SpecError(
+            f"{where}: {key} = {_short(value)} contains a NUL character, which no file name "
+            "can hold; fix the name"
+        )
     candidate = Path(value)
     if not candidate.is_absolute():
         candidate = folder / candidate
-    resolved = candidate.resolve()
+    try:
+        resolved = candidate.resolve(strict=False)
+    except (RuntimeError, OSError) as exc:  # a symbolic link loop (RuntimeError on 3.11)
+        raise SpecError(
+            f"{where}: {key} = {value!r} cannot be resolved ({exc}); it is a symbolic link "
+            "that loops or is unreadable: replace it with the file"
+        ) from None
     if not resolved.is_relative_to(folder):
         raise SpecError(
             f"{where}: {key} = {value!r} resolves to {resolved}, outside the case folder "
@@ -421,6 +460,8 @@ def _load_stiffness(path: Path, where: str) -> np.ndarray:
             f"{where}: stiffness file {path.name} has an unsupported suffix; use "
             f"{', '.join(_STIFFNESS_SUFFIXES)} (one value per guest vertex or face)"
         )
+    if suffix == ".npy":
+        _check_npy_header(path, where)
     try:
         if suffix == ".npy":
             k = np.load(path, allow_pickle=False)
@@ -433,6 +474,39 @@ def _load_stiffness(path: Path, where: str) -> np.ndarray:
             "guest vertex or face with numpy.save or as plain text"
         ) from None
     return k
+
+
+#: Most stiffness values a file may hold (one per guest vertex or face; the mesh limit).
+MAX_STIFFNESS_VALUES = 20_000_000
+
+
+def _check_npy_header(path: Path, where: str) -> None:
+    """Refuse a ``.npy`` whose header claims more values than the file holds or is sensible.
+
+    Read before :func:`numpy.load`, which would otherwise allocate what the
+    header claims (10^12 values: 7 TiB).
+    """
+    try:  # a memory map reads the header only; it fails if the data are shorter
+        view = np.load(path, mmap_mode="r", allow_pickle=False)
+        shape, itemsize = view.shape, view.dtype.itemsize
+        del view
+        data_bytes = path.stat().st_size
+    except (OSError, ValueError, TypeError) as exc:
+        shape, itemsize, data_bytes = None, 0, 0
+        reason = str(exc)
+    if shape is None:
+        raise SpecError(
+            f"{where}: the stiffness file {path.name} is not a valid .npy file of its declared "
+            f"size ({reason[:200]}); the file is truncated or corrupt: save it again with "
+            "numpy.save"
+        )
+    count = math.prod(shape)
+    if count > MAX_STIFFNESS_VALUES or count * itemsize > data_bytes:
+        raise SpecError(
+            f"{where}: the stiffness file {path.name} claims {count:,} values of {itemsize} "
+            f"bytes but the file has {data_bytes:,} bytes (at most {MAX_STIFFNESS_VALUES:,} "
+            "values are read); the file is truncated or corrupt: save it again with numpy.save"
+        )
 
 
 def _bool(value: Any, where: str, key: str) -> bool:
@@ -498,6 +572,7 @@ def _resample(raw: Any, where: str) -> ResampleSpec | None:
             )
         kw["target_edge"] = None if t is None else float(t)
     if "iterations" in raw:
+        _big_int(raw["iterations"], table, "iterations")
         if not _is_int(raw["iterations"]) or raw["iterations"] < 1:
             raise SpecError(f"{table}: iterations = {raw['iterations']!r} must be an integer >= 1")
         kw["iterations"] = int(raw["iterations"])
@@ -574,14 +649,28 @@ def _find_mesh(folder: Path, role: str, where: str) -> Path:
     return _inside(folder, found[0].name, where, role)
 
 
+#: Largest join.toml read (a spec with an inline stiffness of 20 M values is ~400 MB).
+MAX_SPEC_BYTES = 512 << 20
+
+
 def _read_toml(path: Path) -> dict:
     if tomllib is None:  # pragma: no cover - Python 3.10 without tomli
         raise SpecError(
             f"{path}: reading TOML on Python 3.10 needs the package 'tomli'; pip install tomli"
         )
     try:
+        if path.stat().st_size > MAX_SPEC_BYTES:
+            raise SpecError(
+                f"{path}: {path.stat().st_size:,} bytes is too large for a case spec (at most "
+                f"{MAX_SPEC_BYTES:,}); put large arrays such as a stiffness in a .npy file"
+            )
         with open(path, "rb") as fh:
             return tomllib.load(fh)
+    except RecursionError:
+        raise SpecError(
+            f"{path}: nested too deeply to read (arrays or tables inside each other thousands "
+            "of times); a spec needs at most a few levels: fix the file"
+        ) from None
     except tomllib.TOMLDecodeError as exc:
         raise SpecError(f"{path}: not valid TOML ({exc}); fix the syntax") from None
     except UnicodeDecodeError as exc:
