@@ -288,9 +288,15 @@ class _LoopIndex:
     def _snap(self, p: np.ndarray, what: str) -> int:
         if not np.isfinite(p).all():
             raise CurveError(f"{what}: the point {p.tolist()} is not finite")
-        d = np.linalg.norm(self.mesh.V[self.boundary] - p, axis=1)
+        with np.errstate(over="ignore"):  # overflow to inf is handled below
+            d = np.linalg.norm(self.mesh.V[self.boundary] - p, axis=1)
         k = int(np.argmin(d))
         limit = SNAP_DISTANCE * self.mean_edge
+        if not np.isfinite(d[k]):  # |p| near 1e308: the difference overflows
+            raise CurveError(
+                f"{what}: the point {p.tolist()} is too far out to measure (its distance to "
+                f"{self.mesh.name} overflows float64); give a point on the boundary to join"
+            )
         if d[k] > limit:
             raise CurveError(
                 f"{what}: the point {np.round(p, 6).tolist()} is {d[k]:.4g} from the nearest "
@@ -353,8 +359,12 @@ def select_curve(mesh: Mesh, spec: Any, *, name: str = "curve") -> SelectedCurve
             raise CurveError(f"{name}: 'end' and 'via' need a 'start' vertex as well")
         if curve.loop is None and len(loops) != 1:
             sizes = [len(lp) for lp in loops]
+            shown = str(sizes)
+            if len(sizes) > 10:  # bounded: a scan may have tens of thousands of tiny holes
+                hint = "; close small holes with igljoin clean --close-holes"
+                shown = f"{str(sizes[:10])[:-1]}, ... and {len(sizes) - 10:,} more]{hint}"
             raise CurveError(
-                f"{name}: {mesh.name} has {len(loops)} boundary loops (sizes {sizes}); say which "
+                f"{name}: {mesh.name} has {len(loops):,} boundary loops (sizes {shown}); say which "
                 "to join with a loop index, a start vertex or the curve's vertex indices"
             )
         k = 0 if curve.loop is None else int(curve.loop)

@@ -806,8 +806,20 @@ def _cmd_render(parser, args) -> int:
     return 0
 
 
+class NoDisplayError(MissingExtraError):
+    """``igljoin inspect`` was run where no window can open."""
+
+
 def _cmd_inspect(parser, args) -> int:
     viz = _viz()
+    from .viz._backend import has_display
+
+    if not has_display():  # checked before the join: the window could never open
+        raise NoDisplayError(
+            "inspect opens an interactive window, but there is no display here (neither "
+            "DISPLAY nor WAYLAND_DISPLAY is set); render a picture instead: igljoin render "
+            f"{' '.join(map(str, args.inputs))} -o picture.png (same curve and option flags)"
+        )
     solved = _solved_from_inputs(parser, args)
     viz.inspect(solved.result, title=solved.spec.name)
     return 0
@@ -823,6 +835,18 @@ def _one_line(exc: BaseException) -> str:
             text += f": {exc.filename}"
         return text
     return str(exc) or type(exc).__name__
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so that the interpreter's final flush cannot fail again."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):
+        pass
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -845,7 +869,12 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         return 2
     try:
-        return args.func(args.parser, args)
+        code = args.func(args.parser, args)
+        sys.stdout.flush()  # inside the try: a closed pipe shows up here, not at exit
+        return code
+    except BrokenPipeError:  # the reader went away (`| head`): end quietly, as cat does
+        _silence_stdout()
+        return 141  # 128 + SIGPIPE, what a shell reports for a command ended by a closed pipe
     except (IgljoinError, OSError, MissingExtraError) as exc:
         print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
         return 1

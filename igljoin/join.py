@@ -37,7 +37,7 @@ from .terms import (
     edge_stiffness,
     unique_edges,
 )
-from .validate import check_guest_reaches_seam, check_surface
+from .validate import check_guest_reaches_seam, check_seam_scales, check_surface
 
 __all__ = ["JoinSolver", "JoinResult", "SeamPair", "SolveProgress", "join"]
 
@@ -416,6 +416,7 @@ class JoinSolver:
             ]
         resolved = [self._select(*spec, *name) for spec, name in zip(specs, names)]
         _check_disjoint(resolved)
+        check_seam_scales(self.host.V, self.guest.V, resolved)
         paired = pair_seams(
             self.host.V,
             [r.host_curve for r in resolved],

@@ -328,8 +328,7 @@ def _is_number(v: Any) -> bool:
 def _big_int(value: Any, where: str, key: str) -> None:
     if _is_int(value) and value > MAX_SPEC_INT:
         raise SpecError(
-            f"{where}: {key} = {_short(value)} is too large; it must be at most "
-            f"{MAX_SPEC_INT:,}"
+            f"{where}: {key} = {_short(value)} is too large; it must be at most {MAX_SPEC_INT:,}"
         )
 
 

@@ -11,6 +11,11 @@ from .errors import MeshError, SolveError
 from .mesh import Mesh
 
 __all__ = [
+    "MAX_COORDINATE",
+    "MAX_SEAM_LENGTH_RATIO",
+    "MIN_EDGE_DIGITS",
+    "check_coordinates",
+    "check_seam_scales",
     "check_surface",
     "check_guest_reaches_seam",
     "relative_area_floor",
@@ -19,6 +24,101 @@ __all__ = [
 
 #: Faces whose area is below this fraction of the mean face area count as zero-area.
 relative_area_floor = 1e-12
+
+#: Largest coordinate magnitude accepted. The join squares lengths and multiplies
+#: areas (fourth powers of coordinates) in float64, which overflows near 1e308:
+#: at 1e77 every face area already comes out as zero. 1e50 leaves a wide margin
+#: and is far beyond any unit (a metre in nanometres is 1e9).
+MAX_COORDINATE = 1e50
+#: Fewest significant decimal digits of an edge length that the coordinates must
+#: keep: with |x| = 1e15 and unit edges float64 resolves 0.1 of an edge, and the
+#: seam gap came out at 29 % of an edge. 4 digits keep rounding below 1e-4 edges.
+MIN_EDGE_DIGITS = 4
+#: Largest ratio of the two seam curves' lengths: a guest whose seam is 4 times
+#: longer (or shorter) than the host's must be squeezed (stretched) 4-fold along
+#: the whole seam, the sign of a unit mismatch (mm vs cm is 10x) rather than of a
+#: graft that fits; the paper's longer/shorter samples differ by far less.
+MAX_SEAM_LENGTH_RATIO = 4.0
+
+
+def check_coordinates(mesh: Mesh, role: str) -> None:
+    """Refuse coordinates too large for float64 or too large for the mesh's edge lengths.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    role : str
+        Name used in messages.
+
+    Raises
+    ------
+    MeshError
+        If a coordinate exceeds :data:`MAX_COORDINATE` in magnitude, or the
+        largest magnitude leaves fewer than :data:`MIN_EDGE_DIGITS` significant
+        digits of the median edge length (e.g. a mesh placed at 1e15).
+    """
+    if mesh.n_vertices == 0 or mesh.n_faces == 0:
+        return
+    mag = float(np.abs(mesh.V).max())
+    if mag > MAX_COORDINATE:
+        raise MeshError(
+            f"{role}: coordinates reach {mag:.3g}, beyond the {MAX_COORDINATE:.0e} igljoin "
+            "accepts: areas and squared lengths of such coordinates overflow float64; rescale "
+            "the mesh to its real units (e.g. millimetres)"
+        )
+    F = mesh.F
+    e = np.linalg.norm(mesh.V[F[:, [1, 2, 0]]] - mesh.V[F], axis=2).reshape(-1)
+    edge = float(np.median(e))
+    resolution = mag * np.finfo(np.float64).eps
+    if edge > 0 and resolution > edge * 10.0**-MIN_EDGE_DIGITS:
+        digits = max(0.0, np.log10(edge / resolution)) if resolution > 0 else 16.0
+        raise MeshError(
+            f"{role}: coordinates of magnitude {mag:.3g} keep only {digits:.1f} significant "
+            f"digits of its median edge length {edge:.3g} (float64 has 16 in all); results "
+            f"would be rounding noise. Move host and guest by the same offset near the origin "
+            "(subtract the host's centroid from both) and join again"
+        )
+
+
+def _curve_length(V: np.ndarray, idx: np.ndarray, closed: bool) -> float:
+    P = V[np.asarray(idx)]
+    seg = (np.roll(P, -1, axis=0) - P) if closed else np.diff(P, axis=0)
+    return float(np.linalg.norm(seg, axis=1).sum())
+
+
+def check_seam_scales(host_V: np.ndarray, guest_V: np.ndarray, seams) -> None:
+    """Refuse seams whose host and guest curves differ in length by a unit-mismatch factor.
+
+    Parameters
+    ----------
+    host_V : ndarray, shape (n_h, 3)
+    guest_V : ndarray, shape (n_g, 3)
+    seams : iterable
+        Objects with ``host_curve`` and ``guest_curve``, each having
+        ``indices`` (ndarray of int) and ``closed`` (bool).
+
+    Raises
+    ------
+    MeshError
+        If a guest curve is more than :data:`MAX_SEAM_LENGTH_RATIO` times
+        longer or shorter than its host curve.
+    """
+    for k, s in enumerate(seams):
+        hc, gc = s.host_curve, s.guest_curve
+        lh = _curve_length(host_V, hc.indices, bool(hc.closed))
+        lg = _curve_length(guest_V, gc.indices, bool(gc.closed))
+        if lh <= 0 or lg <= 0:
+            continue
+        ratio = lg / lh
+        if ratio > MAX_SEAM_LENGTH_RATIO or ratio < 1.0 / MAX_SEAM_LENGTH_RATIO:
+            which = "" if k == 0 else f" (seam {k})"
+            raise MeshError(
+                f"the guest curve{which} is {ratio:.3g} times as long as the host curve "
+                f"({lg:.4g} against {lh:.4g}); beyond a factor {MAX_SEAM_LENGTH_RATIO:g} the "
+                "guest cannot fit without a gross squeeze or stretch: check that both meshes "
+                "use the same units (mm vs cm is a factor 10) and that the right curves are "
+                "selected"
+            )
 
 
 def _first(idx: np.ndarray, k: int = 5) -> str:
@@ -195,6 +295,7 @@ def check_surface(mesh: Mesh, role: str) -> None:
     role : {"host", "guest"}
     """
     F = mesh.F
+    check_coordinates(mesh, role)
     fix = "repair it with igljoin.clean(mesh) (or `igljoin clean IN -o OUT`)"
     rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
     if rep.any():
@@ -225,6 +326,12 @@ def check_surface(mesh: Mesh, role: str) -> None:
         )
     dcount = _row_counts(np.stack([src, src[ahead]], axis=1), n)
     if (dcount > 1).any():
+        if not orientable(F):
+            raise MeshError(
+                f"{role}: the surface is non-orientable (a Möbius-like twist: no choice of face "
+                "orientations is consistent), so it has no inside and outside to join; "
+                "igljoin clean cannot fix this: remodel the surface or cut it along the twist"
+            )
         raise MeshError(
             f"{role}: {int((dcount > 1).sum())} edges are traversed twice in the same direction "
             f"(faces inconsistently oriented); {fix} — it orients faces consistently"
@@ -252,6 +359,20 @@ def check_surface(mesh: Mesh, role: str) -> None:
             f"guest: {idx.size} vertices are not used by any face (unreferenced; first "
             f"{_first(idx)}); they cannot be deformed — {fix}"
         )
+
+
+def orientable(F: np.ndarray) -> bool:
+    """Whether the edge-manifold surface ``F`` can be oriented consistently.
+
+    libigl's ``bfs_orient`` flips faces to agree with their neighbours; if
+    some edge is still traversed twice in the same direction afterwards, no
+    orientation exists (a Möbius strip).
+    """
+    FF, _ = igl.bfs_orient(np.ascontiguousarray(F, dtype=np.int64))
+    FF = np.asarray(FF)
+    n = int(F.max()) + 1
+    directed = np.concatenate([FF[:, [0, 1]], FF[:, [1, 2]], FF[:, [2, 0]]])
+    return not (_row_counts(directed, n) > 1).any()
 
 
 def check_guest_reaches_seam(F: np.ndarray, n: int, seam: np.ndarray) -> None:

@@ -9,6 +9,7 @@ changing a message.
 from __future__ import annotations
 
 import os
+import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -371,13 +372,13 @@ def _corpus() -> list[Case]:
             "negative weight",
             lambda t: _join(shape_weight=-1.0),
             igljoin.OptionsError,
-            ("shape_weight", "finite number >= 0"),
+            ("shape_weight", "finite number from 0 to 1e+06"),
         ),
         Case(
             "zero iterations",
             lambda t: _join(max_iterations=0),
             igljoin.OptionsError,
-            ("max_iterations", "positive integer"),
+            ("max_iterations", "an integer from 1 to 1,000,000"),
         ),
         Case(
             "unknown option",
@@ -433,7 +434,211 @@ def _corpus() -> list[Case]:
     return cases
 
 
-CORPUS = _corpus()
+def _npy_claiming(tmp: Path, count: int) -> Path:
+    """A .npy file whose header claims ``count`` float64 values but holds 8 bytes."""
+    import numpy.lib.format as npformat
+
+    folder = _case_folder(tmp, '[options]\nstiffness = "k.npy"\n', name="npy")
+    with open(folder / "k.npy", "wb") as fh:
+        npformat.write_array_header_1_0(
+            fh, {"descr": "<f8", "fortran_order": False, "shape": (count,)}
+        )
+        fh.write(b"\0" * 8)
+    return folder
+
+
+def _symlink_loop(tmp: Path, name: str) -> Path:
+    stale = tmp / f"loop-{name.replace('.', '-')}"
+    if stale.exists() or stale.is_symlink():  # the docs table reuses one folder
+        shutil.rmtree(stale)
+    folder = _case_folder(tmp, "", name=stale.name)
+    (folder / name).unlink()
+    os.symlink(name, folder / name)  # points at itself
+    return folder
+
+
+def _mobius(n: int = 24) -> tuple[np.ndarray, np.ndarray]:
+    """A Möbius strip: two rows of vertices joined with a half twist."""
+    t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    V = np.array(
+        [
+            [
+                (1 + w * np.cos(a / 2)) * np.cos(a),
+                (1 + w * np.cos(a / 2)) * np.sin(a),
+                w * np.sin(a / 2),
+            ]
+            for w in (-0.3, 0.3)
+            for a in t
+        ]
+    )
+    F = [[i, i + 1, n + i + 1] for i in range(n - 1)] + [
+        [i, n + i + 1, n + i] for i in range(n - 1)
+    ]
+    F += [[n - 1, n, 0], [n - 1, 0, 2 * n - 1]]  # the twist: bottom row meets top row
+    return V, np.array(F)
+
+
+def _safety_corpus() -> list[Case]:
+    """Inputs that once reached the user as a traceback, a hang or a misleading message."""
+    from igljoin.clean import resample
+    from igljoin.errors import OutputError
+    from igljoin.pipeline import run_case
+
+    return [
+        Case(
+            "deeply nested TOML (5,000 brackets)",
+            lambda t: igljoin.load_case(
+                _case_folder(t, "[options]\nx = " + "[" * 5000 + "]" * 5000 + "\n", name="deep")
+            ),
+            igljoin.SpecError,
+            ("nested too deeply", "join.toml"),
+        ),
+        Case(
+            "weight beyond float range (10**400)",
+            lambda t: _join(shape_weight=10**400),
+            igljoin.OptionsError,
+            ("shape_weight=1000000000000000000000000000000000000000... (401 characters)",),
+        ),
+        Case(
+            "time limit beyond float range",
+            lambda t: _join(time_limit=10**400),
+            igljoin.OptionsError,
+            ("time_limit=", "out of range"),
+        ),
+        Case(
+            "iteration cap beyond reason",
+            lambda t: _join(max_iterations=10**400),
+            igljoin.OptionsError,
+            ("max_iterations=", "from 1 to 1,000,000"),
+        ),
+        Case(
+            "weight far beyond the others (1e308)",
+            lambda t: _join(shape_weight=1e308),
+            igljoin.OptionsError,
+            ("shape_weight=1e+308", "only the ratios of the weights matter"),
+        ),
+        Case(
+            "smooth weight 1e308",
+            lambda t: _join(smooth_weight=1e308),
+            igljoin.OptionsError,
+            ("smooth_weight=1e+308", "from 0 to 1e+06"),
+        ),
+        Case(
+            "array given as a string option",
+            lambda t: _join(smooth_mode=np.array(["robust", "paper"])),
+            igljoin.OptionsError,
+            ("smooth_mode=array(", "give one string"),
+        ),
+        Case(
+            "spec loop index beyond float range",
+            lambda t: igljoin.load_case(
+                _case_folder(t, f"[host_curve]\nloop = {10**400}\n", name="bigloop")
+            ),
+            igljoin.SpecError,
+            ("loop = ", "too large", "2,147,483,647"),
+        ),
+        Case(
+            "spec resample iterations beyond float range",
+            lambda t: igljoin.load_case(
+                _case_folder(t, f"[options.resample]\niterations = {10**400}\n", name="bigit")
+            ),
+            igljoin.SpecError,
+            ("iterations = ", "too large"),
+        ),
+        Case(
+            "spec weight beyond float range",
+            lambda t: igljoin.load_case(
+                _case_folder(t, f"[options]\nsmooth_weight = {10**400}\n", name="bigw")
+            ),
+            igljoin.SpecError,
+            ("smooth_weight=", "out of range"),
+        ),
+        Case(
+            "NUL byte in a spec path",
+            lambda t: igljoin.load_case(_case_folder(t, 'host = "ho\\u0000st.ply"\n', name="nul")),
+            igljoin.SpecError,
+            ("NUL character",),
+        ),
+        Case(
+            "host.ply is a symbolic link loop",
+            lambda t: igljoin.load_case(_symlink_loop(t, "host.ply")),
+            igljoin.SpecError,
+            ("symbolic link that loops",),
+        ),
+        Case(
+            "join.toml is a symbolic link loop",
+            lambda t: igljoin.load_case(_symlink_loop(t, "join.toml")),
+            igljoin.SpecError,
+            ("join.toml", "symbolic link that loops"),
+        ),
+        Case(
+            ".npy stiffness whose header claims 10^12 values",
+            lambda t: igljoin.load_case(_npy_claiming(t, 10**12)),
+            igljoin.SpecError,
+            ("k.npy", "truncated or corrupt"),
+        ),
+        Case(
+            "clean max_hole_edges beyond C++ int",
+            lambda t: igljoin.clean(GUEST, close_holes=True, max_hole_edges=2**40),
+            igljoin.MeshError,
+            ("max_hole_edges=1099511627776", "from 3 to 2,147,483,647"),
+        ),
+        Case(
+            "resample iterations 2147483647 (was a hang)",
+            lambda t: resample(GUEST, 1.0, iterations=2147483647),
+            igljoin.MeshError,
+            ("iterations=2147483647", "from 1 to 100"),
+        ),
+        Case(
+            "resample to a tiny edge (was 5.7 GB, then a crash)",
+            lambda t: resample(GUEST, 1e-4),
+            igljoin.MeshError,
+            ("faces, more than the 2,000,000 allowed", "target edge of at least"),
+        ),
+        Case(
+            "coordinates at 1e77 (was: zero area)",
+            lambda t: _join(
+                igljoin.Mesh(GUEST.V * 1e77, GUEST.F), igljoin.Mesh(HOST.V * 1e77, HOST.F)
+            ),
+            igljoin.MeshError,
+            ("host: coordinates reach", "overflow float64", "rescale"),
+        ),
+        Case(
+            "both meshes offset by 1e15 (too few digits)",
+            lambda t: _join(
+                igljoin.Mesh(GUEST.V + 1e15, GUEST.F), igljoin.Mesh(HOST.V + 1e15, HOST.F)
+            ),
+            igljoin.MeshError,
+            ("significant digits", "near the origin"),
+        ),
+        Case(
+            "guest at 10 times the host's scale (units)",
+            lambda t: _join(igljoin.Mesh(GUEST.V * 10.0, GUEST.F)),
+            igljoin.MeshError,
+            ("10 times as long as the host curve", "same units"),
+        ),
+        Case(
+            "Möbius-strip guest (was: run clean)",
+            lambda t: _join(_mobius()),
+            igljoin.MeshError,
+            ("non-orientable", "igljoin clean cannot fix this"),
+        ),
+        Case(
+            "a point at 1e308 (was: [inf, inf, inf] is inf)",
+            lambda t: _join(hc={"start": [1e308, 1e308, 1e308]}),
+            igljoin.CurveError,
+            ("too far out to measure", "[1e+308, 1e+308, 1e+308]"),
+        ),
+        Case(
+            "an existing file as output folder",
+            lambda t: run_case(_case_folder(t, "", name="tofile"), _write(t, "notes.txt", b"x")),
+            OutputError,
+            ("is an existing file, not a folder",),
+        ),
+    ]
+
+
+CORPUS = _corpus() + _safety_corpus()
 
 
 def test_corpus_has_at_least_thirty_kinds():
