@@ -63,6 +63,7 @@ FIXES = (
     "sliver_faces_removed",
     "small_component_faces",
     "holes_closed",
+    "touching_vertices_separated",
 )
 
 #: Problems counted by :func:`diagnose` (each is 0 for a mesh ready to join).
@@ -726,6 +727,7 @@ def clean(
             V, F, source = _arrays(ms)
             counts["holes_closed"] = len(loops) - len(boundary_loops(F))
             to_output = _to_output_map(m.V, V, source)
+    V, counts["touching_vertices_separated"] = _separate_touching(V, F)
     vattrs = {}
     if m.vertex_attributes and (source >= 0).all():
         vattrs = {k: np.asarray(v)[source] for k, v in m.vertex_attributes.items()}
@@ -739,6 +741,61 @@ def clean(
         kept_loop=kept_loop,
     )
     return out, report
+
+
+#: How far :func:`clean` moves a vertex off another at the same position, in mean
+#: edge lengths: far above float64 rounding (1e-16), far below anything visible.
+TOUCH_SEPARATION = 1e-3
+
+
+def _separate_touching(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int]:
+    """Move apart vertices that share a position but belong to separate sheets.
+
+    Two sheets of a surface that touch at a point (``cow.obj``: two closed
+    fans meeting at one position) have a vertex each at that point. Merging
+    them makes a non-manifold vertex and splitting that re-creates the
+    duplicate, so instead every copy but the first moves
+    :data:`TOUCH_SEPARATION` mean edges towards the centroid of its own
+    one-ring: onto its own sheet, without flipping a face.
+
+    Parameters
+    ----------
+    V : ndarray, shape (n, 3)
+    F : ndarray, shape (m, 3)
+
+    Returns
+    -------
+    V : ndarray, shape (n, 3)
+        A copy with the copies moved (``V`` itself if nothing moved).
+    moved : int
+        How many vertices moved.
+    """
+    used = np.zeros(len(V), dtype=bool)
+    used[F.reshape(-1)] = True
+    ids = np.flatnonzero(used)
+    _, inverse, counts = np.unique(V[ids], axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    shared = counts[inverse] > 1
+    if not shared.any():
+        return V, 0
+    edges, _, _ = _undirected_edges(F)
+    mean_edge = float(np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1).mean())
+    out = V.copy()
+    seen: set[int] = set()
+    moved = 0
+    for v, group in zip(ids[shared], inverse[shared]):
+        if group not in seen:  # the first copy stays where it is
+            seen.add(int(group))
+            continue
+        ring = np.unique(F[(F == v).any(axis=1)])
+        ring = ring[ring != v]
+        direction = V[ring].mean(axis=0) - V[v]
+        length = float(np.linalg.norm(direction))
+        if length == 0.0:
+            continue  # diagnose() will still report it, naming the vertex
+        out[v] = V[v] + direction * (TOUCH_SEPARATION * mean_edge / length)
+        moved += 1
+    return out, moved
 
 
 # --------------------------------------------------------------------------- resample
