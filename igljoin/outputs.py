@@ -139,8 +139,9 @@ def check_folder(folder: str | os.PathLike, names: Iterable[str], *, what: str =
             continue
         if entry.is_symlink() or not entry.is_file():
             raise OutputError(
-                f"{what} {folder} already holds a folder or link named {name!r}, which igljoin "
-                "writes as a file; move it away or choose another output folder"
+                f"{what} {folder} already holds a folder, link or special file (e.g. a FIFO) "
+                f"named {name!r}, which igljoin writes as a regular file and never replaces: "
+                "move it away or choose another output folder"
             )
         if name not in owned:
             raise OutputError(

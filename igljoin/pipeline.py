@@ -1187,7 +1187,7 @@ class _Run:
                     continue
                 row = self.lost(case, exc)
             except (IgljoinError, OSError) as exc:  # the case's folder could not be written
-                row = self.lost(case, exc, step="publish")
+                row = self.lost(case, exc, step="output")
             except BaseException as exc:  # a worker died or the task was lost
                 row = self.lost(case, exc)
             self.record(case, row)
