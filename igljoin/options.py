@@ -189,7 +189,7 @@ class JoinOptions:
         if self.stiffness is not None:
             try:
                 k = np.asarray(self.stiffness, dtype=np.float64)
-            except (TypeError, ValueError):
+            except (TypeError, ValueError, OverflowError):
                 k = np.zeros(0)
             if k.ndim != 1 or k.size == 0 or not np.isfinite(k).all() or (k <= 0).any():
                 raise OptionsError(

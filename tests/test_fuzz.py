@@ -184,3 +184,218 @@ def test_random_joins_weld_cleanly(data):
     except igljoin.IgljoinError:
         return
     assert np.isfinite(welded.mesh.V).all()
+
+
+# --------------------------------------------------------------------------- hostile inputs
+# The input classes of the "nothing lost, nothing faked" review: mesh-file tokens, spec
+# values of extreme size and type, and file-system oddities. Each may only raise
+# igljoin's documented errors (or OSError for the file system), never hang or crash.
+
+#: Examples per hostile-input test in the ci profile (each writes files: ~5 ms each).
+HOSTILE_EXAMPLES = max(50, settings.default.max_examples // 4)
+
+_huge_ints = st.one_of(
+    st.integers(-(10**400), 10**400), st.integers(2**31 - 2, 2**63 + 2), st.integers(-3, 3)
+)
+_odd_floats = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([1e308, -1e308, 5e-324])
+)
+_odd_strings = st.text(
+    alphabet=st.characters(min_codepoint=0, max_codepoint=0x2FF), max_size=12
+) | st.sampled_from(["robust", "../host.ply", "host.ply\x00", "", "k.npy"])
+
+
+def _toml(value, depth: int = 0) -> str:
+    """TOML text of a Python value (ints of any size, floats incl. nan/inf, nested arrays)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if value != value:
+            return "nan"
+        if value in (float("inf"), float("-inf")):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    if isinstance(value, str):
+        return (
+            '"'
+            + "".join(c if c.isalnum() or c in "._-/ " else f"\\u{ord(c):04x}" for c in value)
+            + '"'
+        )
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml(v, depth + 1) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k} = {_toml(v, depth + 1)}" for k, v in value.items()) + "}"
+    raise TypeError(value)
+
+
+_spec_values = st.recursive(
+    st.one_of(_huge_ints, _odd_floats, _odd_strings, st.booleans()),
+    lambda inner: (
+        st.lists(inner, max_size=4)
+        | st.dictionaries(st.sampled_from(["enabled", "target_edge", "iterations", "loop"]), inner)
+    ),
+    max_leaves=8,
+)
+_spec_keys = st.sampled_from(
+    [
+        ("options", "shape_weight"),
+        ("options", "smooth_weight"),
+        ("options", "max_iterations"),
+        ("options", "time_limit"),
+        ("options", "smooth_mode"),
+        ("options", "stiffness"),
+        ("options", "resample"),
+        ("options", "cleanup"),
+        ("host_curve", "loop"),
+        ("host_curve", "start"),
+        ("host_curve", "indices"),
+        ("guest_curve", "via"),
+        (None, "host"),
+        (None, "description"),
+    ]
+)
+
+
+def _patch_files(folder) -> None:
+    host = grid(5, 5, np.zeros(25), np.zeros((25, 2)))
+    guest = grid(4, 4, np.zeros(16), np.zeros((16, 2)))
+    igljoin.write_mesh(folder / "host.ply", host)
+    igljoin.write_mesh(folder / "guest.ply", guest)
+
+
+@given(entries=st.lists(st.tuples(_spec_keys, _spec_values), min_size=1, max_size=3))
+@settings(max_examples=HOSTILE_EXAMPLES)
+def test_random_spec_values_only_raise_spec_errors(entries):
+    import tempfile
+    from pathlib import Path
+
+    tables: dict = {}
+    for (table, key), value in entries:
+        tables.setdefault(table, {})[key] = value
+    lines = [f"{k} = {_toml(v)}" for k, v in tables.pop(None, {}).items()]
+    for table, values in tables.items():
+        lines.append(f"[{table}]")
+        lines += [f"{k} = {_toml(v)}" for k, v in values.items()]
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "case"
+        folder.mkdir()
+        _patch_files(folder)
+        (folder / "join.toml").write_text("\n".join(lines) + "\n", encoding="utf-8")
+        t0 = time.perf_counter()
+        try:
+            igljoin.load_case(folder)
+            event("accepted")
+        except igljoin.SpecError:
+            event("rejected: SpecError")
+        assert time.perf_counter() - t0 < CALL_BOUND
+
+
+@given(
+    opts=st.dictionaries(
+        st.sampled_from(
+            [
+                "shape_weight",
+                "smooth_weight",
+                "time_limit",
+                "max_iterations",
+                "smooth_mode",
+                "laplacian",
+                "acceleration",
+                "stiffness",
+                "tolerance",
+            ]
+        ),
+        st.one_of(
+            _huge_ints,
+            _odd_floats,
+            st.builds(lambda n: np.array(["robust"] * n), st.integers(0, 3)),
+            st.builds(np.float32, st.floats(width=32)),
+            st.builds(np.int64, st.integers(-(2**63), 2**63 - 1)),
+        ),
+        max_size=3,
+    )
+)
+@settings(max_examples=HOSTILE_EXAMPLES)
+def test_extreme_api_option_values_only_raise_options_errors(opts):
+    try:
+        igljoin.JoinOptions.make(**opts)
+        event("accepted")
+    except igljoin.OptionsError:
+        event("rejected: OptionsError")
+
+
+_tokens = st.one_of(
+    _huge_ints.map(str),
+    _odd_floats.map(repr),
+    st.sampled_from(["nan", "inf", "-0", "1e400", "0x10", "//", "#", "", "3/4/5", "\x00", "é"]),
+)
+
+
+@given(
+    kind=st.sampled_from(["obj", "off"]),
+    lines=st.lists(
+        st.tuples(st.sampled_from(["v", "f", "vn", "OFF", "", "#"]), st.lists(_tokens, max_size=5)),
+        max_size=12,
+    ),
+)
+@settings(max_examples=HOSTILE_EXAMPLES)
+def test_hostile_mesh_file_tokens_only_raise_read_errors(kind, lines):
+    import tempfile
+    from pathlib import Path
+
+    text = "\n".join(" ".join([head, *toks]) for head, toks in lines) + "\n"
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / f"m.{kind}"
+        path.write_text(text, encoding="utf-8")
+        t0 = time.perf_counter()
+        try:
+            igljoin.read_mesh(path)
+            event("read")
+        except igljoin.IgljoinError as exc:
+            event(f"rejected: {type(exc).__name__}")
+        assert time.perf_counter() - t0 < CALL_BOUND
+
+
+_odd_entries = st.sampled_from(
+    ["regular", "self-loop", "dangling", "directory", "fifo", "empty", "outside"]
+)
+
+
+@given(host=_odd_entries, spec=_odd_entries)
+@settings(max_examples=HOSTILE_EXAMPLES)
+def test_filesystem_oddities_in_a_case_folder_only_raise_spec_errors(host, spec):
+    import os
+    import tempfile
+    from pathlib import Path
+
+    def make(path: Path, how: str, content: bytes) -> None:
+        path.unlink(missing_ok=True)
+        if how == "regular":
+            path.write_bytes(content)
+        elif how == "self-loop":
+            os.symlink(path.name, path)
+        elif how == "dangling":
+            os.symlink("nowhere", path)
+        elif how == "directory":
+            path.mkdir()
+        elif how == "fifo":
+            os.mkfifo(path)  # opening it to read would block: it must never be opened
+        elif how == "empty":
+            path.write_bytes(b"")
+        else:
+            os.symlink("/etc/hostname", path)
+
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "case"
+        folder.mkdir()
+        _patch_files(folder)
+        make(folder / "host.ply", host, (folder / "host.ply").read_bytes())
+        make(folder / "join.toml", spec, b"[host_curve]\nloop = 0\n")
+        try:
+            spec_ = igljoin.load_case(folder)
+            spec_.input_hashes()
+            event("accepted")
+        except igljoin.SpecError:
+            event("rejected: SpecError")
