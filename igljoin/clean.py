@@ -343,8 +343,10 @@ class CleanReport:
         e.g. on the boundary), ``non_manifold_edge_faces`` (faces removed so
         that every edge has at most two faces), ``non_manifold_vertices``
         (vertices split so that each has one fan), ``small_component_faces``
-        (faces of small loose pieces removed) and ``holes_closed`` (boundary
-        loops filled).
+        (faces of small loose pieces removed), ``holes_closed`` (boundary
+        loops filled) and ``touching_vertices_separated`` (copies of a
+        position on separate sheets moved :data:`TOUCH_SEPARATION` mean
+        edges apart, see :func:`_separate_touching`).
     before, after : dict
         :func:`diagnose` of the input and of the output.
     source : ndarray of int64, shape (n_out,)

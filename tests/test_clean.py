@@ -143,6 +143,7 @@ def test_clean_repairs_a_corrupted_real_scan_so_that_it_joins(bunny):
         "sliver_faces_removed": 0,
         "small_component_faces": 1,  # the hanging triangle
         "holes_closed": 4,  # every loop but the kept one
+        "touching_vertices_separated": 0,  # no two sheets touch in this scan
     }
     assert rep.after["ok"] and rep.after["components"] == 1
     assert [lp["size"] for lp in rep.after["loops"]] == [38]
