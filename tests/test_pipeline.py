@@ -175,7 +175,11 @@ def test_good_cases_outputs_are_complete(local_run, cases):
     for case in sorted(cases.iterdir()):
         folder = out / case.name
         if case.name in BAD:
-            assert sorted(p.name for p in folder.iterdir()) == [MANIFEST, "error.json", "timings.json"]
+            assert sorted(p.name for p in folder.iterdir()) == [
+                MANIFEST,
+                "error.json",
+                "timings.json",
+            ]
             error = json.loads((folder / "error.json").read_text())
             assert set(error) == {"case", "igljoin_version", "type", "message", "step", "inputs"}
             continue
