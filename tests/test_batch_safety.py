@@ -254,3 +254,17 @@ def test_full_disk_mid_batch_records_every_case_or_names_it(full_disk, tmp_path)
         assert doc["cases"] == 16
     else:
         assert "disk is full" in summary.summary_error
+
+
+def test_a_worker_without_its_batch_lock_publishes_nothing(fast_cases, tmp_path):
+    from igljoin.errors import OutputError
+    from igljoin.pipeline import _lock_guard, run_case
+
+    lock = tmp_path / ".igljoin-batch.lock"
+    lock.write_text("token-of-the-batch-that-now-owns-the-folder\n")
+    guard = _lock_guard(str(lock), "token-of-a-killed-batch")
+    with pytest.raises(OutputError, match="no longer holds"):
+        run_case(fast_cases / "a", tmp_path / "a", publish_guard=guard)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".igljoin-batch.lock"]  # nothing
+    own = _lock_guard(str(lock), "token-of-the-batch-that-now-owns-the-folder")
+    assert run_case(fast_cases / "a", tmp_path / "a", publish_guard=own)["status"] == "ok"
