@@ -1005,10 +1005,10 @@ def resample(
     m = as_mesh(mesh)
     try:
         target = float(target_edge)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         target = float("nan")
     if not (math.isfinite(target) and target > 0):
-        raise MeshError(f"resample: target_edge={target_edge!r} must be a positive length")
+        raise MeshError(f"resample: target_edge={_short(target_edge)} must be a positive length")
     if (
         isinstance(iterations, bool)
         or not isinstance(iterations, (int, np.integer))

@@ -590,6 +590,12 @@ def _safety_corpus() -> list[Case]:
             ("iterations=2147483647", "from 1 to 100"),
         ),
         Case(
+            "resample target edge beyond float range",
+            lambda t: resample(GUEST, 10**400),
+            igljoin.MeshError,
+            ("target_edge=", "must be a positive length"),
+        ),
+        Case(
             "resample to a tiny edge (was 5.7 GB, then a crash)",
             lambda t: resample(GUEST, 1e-4),
             igljoin.MeshError,

@@ -2,40 +2,36 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
-from pathlib import Path
+import contextlib
+import io
 
 import numpy as np
 import pytest
 
 import igljoin
 from igljoin.clean import TOUCH_SEPARATION, diagnose
+from igljoin.cli import main
 
 from .cuts import cut_piece, sample_mesh_dir
 
-IGLJOIN = Path(sys.executable).parent / "igljoin"
 COW = sample_mesh_dir() / "cow.obj"
 
 
 @pytest.fixture(scope="module")
-def cleaned(tmp_path_factory) -> tuple[igljoin.Mesh, subprocess.CompletedProcess]:
+def cleaned(tmp_path_factory) -> tuple[igljoin.Mesh, int, str]:
     out = tmp_path_factory.mktemp("cow") / "cow-clean.ply"
-    proc = subprocess.run(
-        [str(IGLJOIN), "clean", str(COW), "-o", str(out)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    return igljoin.read_mesh(out), proc
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):  # the command itself, in-process: main(argv)
+        code = main(["clean", str(COW), "-o", str(out)])
+    return igljoin.read_mesh(out), code, buf.getvalue()
 
 
 def test_clean_repairs_the_real_cow(cleaned):
-    mesh, proc = cleaned
+    mesh, code, stdout = cleaned
     raw = igljoin.read_mesh(COW)
     assert diagnose(raw)["problems"]["duplicate_vertices"] == 1  # the touching point
-    assert proc.returncode == 0, proc.stderr
-    assert "touching vertices separated: 1" in proc.stdout
+    assert code == 0
+    assert "touching vertices separated: 1" in stdout
     assert not any(diagnose(mesh)["problems"].values())
     assert (mesh.n_vertices, mesh.n_faces) == (raw.n_vertices, raw.n_faces)
     # only the separated copy moved, and by TOUCH_SEPARATION mean edges (to rounding, 1e-9)
@@ -46,7 +42,7 @@ def test_clean_repairs_the_real_cow(cleaned):
 
 
 def test_the_join_accepts_the_cleaned_cow(cleaned):
-    mesh, _ = cleaned
+    mesh = cleaned[0]
     raw = igljoin.read_mesh(COW)
     moved = int(np.argmax(np.linalg.norm(mesh.V - raw.V, axis=1)))
     far = int(np.argmax(np.linalg.norm(raw.V - raw.V[moved], axis=1)))  # cut away from it
