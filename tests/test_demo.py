@@ -3,16 +3,15 @@
 The demo is run once for the module at a reduced size (resolution 0.4: the six
 joins take ~2 s instead of ~10 s) and its outputs are checked as a user would
 see them: every file is there, the tables parse, the paper's claims are
-checked, and the two figures are pictures of the right things. The console
-script is run once at the paper's sizes, as ``make demo`` runs it.
+checked, and the two figures are pictures of the right things. The command
+line is run once at the paper's sizes, as ``make demo`` runs it (in this
+process, through ``igljoin.cli.main``).
 """
 
 from __future__ import annotations
 
 import csv
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -26,13 +25,14 @@ from PIL import Image  # noqa: E402
 
 from igljoin.viz.figures import FIGURES, figure_layout, paper_figures  # noqa: E402
 
+from .cli_run import call  # noqa: E402
+
 #: Reduced phantom size for the module's demo run (1 = the paper's sizes).
 RESOLUTION = 0.4
 SCENARIOS = ("end_to_end", "partial_patch")
 LENGTHS = ("shorter", "equal", "longer")
 VARIANTS = ("with_smooth_join", "without_smooth_join")
 RESULT_FILES = ("guest.ply", "merged.ply", "report.json")
-IGLJOIN = Path(sys.executable).parent / "igljoin"
 
 
 @pytest.fixture(scope="module")
@@ -187,11 +187,7 @@ def test_figures_are_deterministic(run, tmp_path):
 
 def _cli_demo_available() -> str | None:
     """Why ``igljoin demo`` cannot be run, or None."""
-    if not IGLJOIN.exists():
-        return f"no console script at {IGLJOIN} (pip install -e .)"
-    proc = subprocess.run(
-        [str(IGLJOIN), "demo", "--help"], capture_output=True, text=True, timeout=120
-    )
+    proc = call("demo", "--help")
     if proc.returncode != 0:
         return f"`igljoin demo` is not available yet: {proc.stderr.strip()[-200:]}"
     return None
@@ -204,9 +200,7 @@ def test_cli_demo_at_paper_sizes(tmp_path):
     if why:
         pytest.skip(why)
     out = tmp_path / "demo"
-    proc = subprocess.run(
-        [str(IGLJOIN), "demo", "--out", str(out)], capture_output=True, text=True, timeout=600
-    )
+    proc = call("demo", "--out", out)
     assert proc.returncode == 0, proc.stderr
     assert "Traceback" not in proc.stderr
     report = json.loads((out / "report.json").read_text(encoding="utf-8"))
