@@ -331,17 +331,16 @@ def run(
 def _extra_picture(extra: dict, target: Path) -> Path:
     """Render one case beyond the paper; name its regions where it has them.
 
-    The colour scale covers the case's own area changes (the stiff patch's
-    soft half stretches to 2.5 times its area, beyond the default 1.5).
+    The colour scale (``picture_area_ratio_limit`` of the summary) covers the
+    case's own area changes: the stiff patch's soft half stretches to 1.8
+    times its area (median), beyond the default full colour at 1.5.
     """
     from .viz import picture
     from .viz.annotate import mark_regions
-    from .viz.figures import scale
 
     res = extra["result"]
-    pic = picture(
-        res, view="both", size=(1200, 640), title=extra["title"], limit=scale([res.area_ratio])
-    )
+    limit = extra["summary"]["picture_area_ratio_limit"]
+    pic = picture(res, view="both", size=(1200, 640), title=extra["title"], limit=limit)
     if "regions" in extra:
         inside, labels = extra["regions"]
         mark_regions(pic, res.guest, inside, labels)
@@ -368,6 +367,8 @@ def run_extras(out: Path) -> dict:
     s, k = phantoms.stiff_patch_sample(stiff=10.0)
     patch = JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve, stiffness=k).solve()
     t2 = time.perf_counter()
+    from .viz.figures import scale  # NumPy only: no polyscope needed to pick a colour scale
+
     stiff = k[patch.correspondence.face_parent] > 1.0
     change = np.abs(patch.area_ratio - 1.0)
     _save_result(bypass, out / "bypass_graft")
@@ -386,6 +387,7 @@ def run_extras(out: Path) -> dict:
                 "self_intersecting_pairs": bypass.metrics.get("self_intersections", {}).get(
                     "pairs"
                 ),
+                "picture_area_ratio_limit": scale([bypass.area_ratio]),
             },
         },
         "stiff_patch": {
@@ -398,6 +400,7 @@ def run_extras(out: Path) -> dict:
                 "seconds": round(t2 - t1, 3),
                 "median_area_change_stiff": round(float(np.median(change[stiff])), 4),
                 "median_area_change_soft": round(float(np.median(change[~stiff])), 4),
+                "picture_area_ratio_limit": scale([patch.area_ratio]),
             },
         },
     }
