@@ -173,10 +173,16 @@ def test_figure_is_the_paper_layout_and_not_blank(run, key):
     assert _in_panel(m["red"], lay.bar) > 1000 and _in_panel(m["blue"], lay.bar) > 1000
 
 
-def test_figures_are_deterministic(run, tmp_path):
+@pytest.fixture(scope="module")
+def runs_again() -> list:
+    """The six samples joined a second time in this process (as the module's demo run did)."""
+    return demo.run_samples(RESOLUTION, progress=False)
+
+
+def test_figures_are_deterministic(run, runs_again, tmp_path):
     """Joining again and drawing again gives the same bytes (no timings, no state carried)."""
     out, _ = run
-    again = paper_figures(demo.run_samples(RESOLUTION, progress=False), tmp_path)
+    again = paper_figures(runs_again, tmp_path)
     assert set(again) == set(FIGURES)
     for key, path in again.items():
         assert path.read_bytes() == (out / f"{key}.png").read_bytes(), key
@@ -272,14 +278,13 @@ def test_stiff_patch_picture_names_its_halves_on_a_scale_that_holds_them(run):
     assert (np.abs(left - np.array(LABEL_BOX)).max(axis=-1) == 0).sum() > 200
 
 
-def test_partial_patch_close_up_shows_what_the_smooth_term_changes(run):
+def test_partial_patch_close_up_shows_what_the_smooth_term_changes(runs_again):
     """The seam close-up of the figure's rows 2-3 tells the with/without joins apart."""
     from igljoin.viz import colors
     from igljoin.viz.figures import seam_closeup
     from igljoin.viz.headless import render_meshes
 
-    runs = demo.run_samples(RESOLUTION, progress=False)
-    longer = next(r for r in runs if r.sample.name == "partial_patch/longer")
+    longer = next(r for r in runs_again if r.sample.name == "partial_patch/longer")
     close, k = seam_closeup(longer)
     assert longer.plain.crease[k] == np.nanmax(longer.plain.crease)
     side = _column_side_camera(longer)
