@@ -150,7 +150,7 @@ def colour_bar(
     font, small = fonts(fs)
     cap = max(6, int(0.9 * fs))  # height of a clipping cap
     top = y + int(3.2 * fs) + cap
-    bottom = y + h - int(1.6 * fs) - cap
+    bottom = y + h - int(2.0 * fs) - cap
     bx0 = x + int(0.9 * fs)
     bx1 = bx0 + max(8, int(1.1 * fs))
     draw.text((x + int(0.5 * fs), y + int(0.4 * fs)), "area ratio", fill=_TEXT, font=font)
@@ -187,7 +187,7 @@ def colour_bar(
         r = tip if clipped is not None else row_of(float(np.clip(np.log2(v) / scale, -1.0, 1.0)))
         draw.polygon([(bx0 - 2, r), (bx0 - 8, r - 4), (bx0 - 8, r + 4)], fill=_TEXT)
     draw.text(
-        (x + int(0.5 * fs), bottom + cap + int(0.35 * fs)), "marks: min/max", fill=_DIM, font=small
+        (x + int(0.5 * fs), bottom + cap + int(0.75 * fs)), "marks: min/max", fill=_DIM, font=small
     )
 
 
