@@ -18,7 +18,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-import igl
 import numpy as np
 
 from .errors import CurveError
@@ -136,6 +135,8 @@ def boundary_loops(F: np.ndarray) -> list[np.ndarray]:
     """
     loops = _traced_loops(F)
     if loops is None:
+        import igl  # only for what the tracer leaves (libigl costs start-up time)
+
         loops = [np.asarray(lp, dtype=np.int64) for lp in igl.boundary_loop_all(F) if len(lp) > 0]
     loops.sort(key=len, reverse=True)
     return loops

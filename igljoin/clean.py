@@ -25,7 +25,6 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-import igl
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -507,6 +506,8 @@ def _orient(F: np.ndarray) -> tuple[np.ndarray, int]:
     """
     if not len(F):
         return F, 0
+    import igl  # here, not at the top: libigl costs start-up time (igljoin info)
+
     FF, C = igl.bfs_orient(np.ascontiguousarray(F, dtype=np.int64))
     FF = np.asarray(FF, dtype=np.int64)
     same = np.zeros(len(F), dtype=bool)

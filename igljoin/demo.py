@@ -323,13 +323,28 @@ def run(
             notes.append(f"figures skipped: {exc}")
         else:
             paths.update(written)
-            from .viz import render
-
             for name, extra in extras.items():
-                target = out / f"{name}.png"
-                render(extra["result"], target, view="both", size=(1200, 640), title=extra["title"])
-                paths[name] = target
+                paths[name] = _extra_picture(extra, out / f"{name}.png")
     return {"paths": paths, "claims": checks, "rows": rows, "notes": notes}
+
+
+def _extra_picture(extra: dict, target: Path) -> Path:
+    """Render one case beyond the paper; name its regions where it has them.
+
+    The colour scale (``picture_area_ratio_limit`` of the summary) covers the
+    case's own area changes: the stiff patch's soft half stretches to 1.8
+    times its area (median), beyond the default full colour at 1.5.
+    """
+    from .viz import picture
+    from .viz.annotate import mark_regions
+
+    res = extra["result"]
+    limit = extra["summary"]["picture_area_ratio_limit"]
+    pic = picture(res, view="both", size=(1200, 640), title=extra["title"], limit=limit)
+    if "regions" in extra:
+        inside, labels = extra["regions"]
+        mark_regions(pic, res.guest, inside, labels)
+    return pic.save(target)
 
 
 def run_extras(out: Path) -> dict:
@@ -341,7 +356,9 @@ def run_extras(out: Path) -> dict:
     Returns
     -------
     dict
-        Per case: ``result`` (JoinResult), ``title`` and a JSON ``summary``.
+        Per case: ``result`` (JoinResult), ``title``, a JSON ``summary`` and,
+        for the stiff patch, ``regions``: the stiff faces of the result's
+        guest and the names of both halves.
     """
     g = phantoms.bypass_graft_sample()
     t0 = time.perf_counter()
@@ -350,6 +367,8 @@ def run_extras(out: Path) -> dict:
     s, k = phantoms.stiff_patch_sample(stiff=10.0)
     patch = JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve, stiffness=k).solve()
     t2 = time.perf_counter()
+    from .viz.figures import scale  # NumPy only: no polyscope needed to pick a colour scale
+
     stiff = k[patch.correspondence.face_parent] > 1.0
     change = np.abs(patch.area_ratio - 1.0)
     _save_result(bypass, out / "bypass_graft")
@@ -368,17 +387,20 @@ def run_extras(out: Path) -> dict:
                 "self_intersecting_pairs": bypass.metrics.get("self_intersections", {}).get(
                     "pairs"
                 ),
+                "picture_area_ratio_limit": scale([bypass.area_ratio]),
             },
         },
         "stiff_patch": {
             "result": patch,
             "title": "patch with a 10x stiffer half (shorter than its hole)",
+            "regions": (stiff, ("stiff half (10x)", "soft half")),
             "summary": {
                 "converged": bool(patch.converged),
                 "iterations": int(patch.iterations),
                 "seconds": round(t2 - t1, 3),
                 "median_area_change_stiff": round(float(np.median(change[stiff])), 4),
                 "median_area_change_soft": round(float(np.median(change[~stiff])), 4),
+                "picture_area_ratio_limit": scale([patch.area_ratio]),
             },
         },
     }

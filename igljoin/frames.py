@@ -19,7 +19,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.spatial import cKDTree
 
 __all__ = [
     "SeamFrames",
@@ -298,6 +297,8 @@ def _quadric_normals(
     """
     lo, hi = P.min(axis=0) - radius, P.max(axis=0) + radius
     near = np.flatnonzero(((V >= lo) & (V <= hi)).all(axis=1))
+    from scipy.spatial import cKDTree  # here: scipy.spatial costs start-up time
+
     hits = cKDTree(V[near]).query_ball_point(P, radius)
     counts = np.array([len(h) for h in hits])
     M = int(counts.max()) if counts.size else 0

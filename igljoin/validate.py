@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import igl
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -303,6 +302,8 @@ def check_surface(mesh: Mesh, role: str) -> None:
         raise MeshError(
             f"{role}: {idx.size} faces repeat a vertex (degenerate; first {_first(idx)}); {fix}"
         )
+    import igl  # here, not at the top: libigl costs start-up time (igljoin info)
+
     area = igl.doublearea(mesh.V, F)
     floor = relative_area_floor * max(float(area.mean()), 1e-300)
     zero = area <= floor
@@ -393,6 +394,8 @@ def check_guest_reaches_seam(F: np.ndarray, n: int, seam: np.ndarray) -> None:
             "igljoin.resample(guest, target_edge) (or resample = true in join.toml) or join a "
             "larger piece"
         )
+    import igl
+
     comp = np.asarray(igl.vertex_components(F), dtype=np.int64)
     touched = np.unique(comp[seam])
     loose = np.setdiff1d(np.unique(comp), touched)

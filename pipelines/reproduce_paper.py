@@ -33,6 +33,12 @@ def _page(table_md: str, figures: dict, seconds: float, resolution: float) -> st
         "the guest's boundary shorter than (0.8×), equal to and longer than (1.25×) the "
         "host's, without and with the smooth-join term. Everything below was produced by "
         f"one such run (resolution {resolution:g}, {seconds:.0f} s on a 2-core machine).\n\n"
+        "Seen face-on, a patch joined with and without the smooth-join term looks the same: "
+        "the two guests differ in a band along the seam. Rows 2 and 3 of the partial-patch "
+        "figure therefore carry an inset, the seam seen along its tangent where its crease "
+        "without the term is sharpest (ringed in the panel), with the crease there. A colour "
+        "bar that ends in a pointed cap marks area ratios beyond its scale, labelled with the "
+        "true extreme.\n\n"
         + (pics + "\n" if pics else "")
         + body
     )
@@ -57,6 +63,7 @@ def main(argv: list[str] | None = None) -> int:
             for key, title in (
                 ("figure_end_to_end", "End-to-end join, laid out like the paper's Fig. 2"),
                 ("figure_partial_patch", "Partial patching, laid out like the paper's Fig. 3"),
+                ("stiff_patch", "Beyond the paper: a patch with a 10x stiffer half"),
             )
             if key in paths
         }

@@ -1,4 +1,10 @@
-"""The ``igljoin`` console script, run for real in a subprocess."""
+"""The ``igljoin`` command line.
+
+Argument handling and output are tested in this process through
+``igljoin.cli.main(argv)`` (:func:`tests.cli_run.call`); what needs a real
+process — the exit status the system sees, a terminal — runs the console
+script (:func:`tests.cli_run.spawn`).
+"""
 
 from __future__ import annotations
 
@@ -6,7 +12,6 @@ import importlib.util
 import json
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -14,18 +19,12 @@ import pytest
 import igljoin
 from igljoin import phantoms
 
+from .cli_run import IGLJOIN, spawn
+from .cli_run import call as run
 from .cuts import sample_mesh_dir
 from .test_clean import corrupt
 
-IGLJOIN = Path(sys.executable).parent / "igljoin"
 COMMANDS = ("join", "batch", "clean", "info", "demo", "render", "inspect")
-
-
-def run(*args, timeout=300) -> subprocess.CompletedProcess:
-    assert IGLJOIN.exists(), "console script missing: run .venv/bin/pip install -e ."
-    return subprocess.run(
-        [str(IGLJOIN), *map(str, args)], capture_output=True, text=True, timeout=timeout
-    )
 
 
 def assert_one_line_error(proc: subprocess.CompletedProcess, code: int, text: str) -> None:
@@ -78,6 +77,16 @@ def test_subcommand_help(command, expected):
     for text in expected:
         assert text in proc.stdout
     assert max(len(line) for line in proc.stdout.splitlines()) <= 100  # wrapped
+
+
+def test_console_script_exit_status():
+    """The process exits with what main() returns: 0, 1 for a failure, 2 for usage."""
+    proc = spawn("--version")
+    assert proc.returncode == 0 and proc.stdout.strip() == f"igljoin {igljoin.__version__}"
+    proc = spawn()
+    assert proc.returncode == 2 and "usage: igljoin" in proc.stderr
+    assert_one_line_error(spawn("frobnicate"), 2, "invalid choice: 'frobnicate'")
+    assert_one_line_error(spawn("info", "no-such-mesh.ply"), 1, "mesh file not found")
 
 
 def test_usage_errors_exit_2():
@@ -235,7 +244,7 @@ def test_join_status_line_on_a_terminal(tmp_path):
 
 def test_join_shows_no_status_line_off_a_terminal(patch_files, tmp_path):
     host, guest = patch_files
-    proc = run("join", host, guest, "-o", tmp_path / "j", "--host-loop", "0")
+    proc = spawn("join", host, guest, "-o", tmp_path / "j", "--host-loop", "0")
     assert proc.returncode == 0 and "joining, iteration" not in proc.stderr
 
 

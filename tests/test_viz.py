@@ -3,7 +3,8 @@
 Everything here renders for real, off-screen through EGL; polyscope is
 initialised once for the whole module (a backend cannot be re-initialised in
 one process), and the render tests do not depend on what was drawn before
-them. The optional-dependency checks run in subprocesses.
+them. Whether ``import igljoin`` pulls in polyscope is checked in a fresh
+subprocess; a missing extra is simulated in this process.
 """
 
 from __future__ import annotations
@@ -113,30 +114,23 @@ def test_import_igljoin_does_not_import_polyscope():
 
 
 @pytest.mark.parametrize("missing", ["polyscope", "PIL"])
-def test_viz_without_its_extra_names_the_extra(missing):
-    proc = _run(
-        f"""
-        import sys
-        sys.modules[{missing!r}] = None  # simulates the package not being installed
-        import igljoin, igljoin.viz
-        from igljoin.errors import MissingExtraError
-        s = igljoin.phantoms.paper_sample("end_to_end", "equal", resolution=0.3)
-        res = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve)
-        calls = [lambda: igljoin.viz.render(res, "never.png")]
-        if {missing!r} == "polyscope":
-            calls.append(lambda: igljoin.viz.inspect(res, show=False))
-        for call in calls:
-            try:
-                call()
-            except MissingExtraError as exc:
-                print(exc)
-            else:
-                raise SystemExit("no MissingExtraError")
-        """
-    )
-    assert proc.returncode == 0, proc.stderr + proc.stdout
+def test_viz_without_its_extra_names_the_extra(missing, monkeypatch):
+    # in this process: a None entry in sys.modules makes `import polyscope` (or PIL) fail as
+    # if the package were not installed, although both are loaded here already
+    monkeypatch.chdir(ROOT)
+    s = igljoin.phantoms.paper_sample("end_to_end", "equal", resolution=0.3)
+    res = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve)
+    monkeypatch.setitem(sys.modules, missing, None)
+    calls = [lambda: igljoin.viz.render(res, "never.png")]
+    if missing == "polyscope":
+        calls.append(lambda: igljoin.viz.inspect(res, show=False))
+    messages = []
+    for call in calls:
+        with pytest.raises(MissingExtraError) as info:
+            call()
+        messages.append(str(info.value))
     package = "polyscope" if missing == "polyscope" else "pillow"
-    for line in proc.stdout.strip().splitlines():
+    for line in messages:
         assert f"'{package}'" in line
         assert "pip install 'igljoin[viz]'" in line
     assert not (ROOT / "never.png").exists()
@@ -475,3 +469,75 @@ def test_session_bad_input(session):
     # show=True could never return here: it says so instead of hanging
     with pytest.raises(RuntimeError, match="needs a display"):
         viz.inspect(shown, show=True)
+
+
+# -- what the pictures say: clipping, the tangent legend, named regions --------------------------
+
+
+def _colour_count(a: np.ndarray, rgb: tuple, tol: int = 0) -> int:
+    return int((np.abs(a.astype(np.int64) - np.array(rgb)).max(axis=-1) <= tol).sum())
+
+
+def test_colour_bar_marks_where_the_data_pass_the_scale():
+    from igljoin.viz.overlay import colour_bar
+
+    box = (0, 0, 160, 500)
+
+    def bar(data_range):
+        img = Image.new("RGB", (160, 500), (40, 40, 40))
+        colour_bar(img, box, 18, 1.5, data_range)
+        return np.asarray(img)
+
+    inside, over, under = bar((0.8, 1.4)), bar((0.8, 2.54)), bar((0.4, 1.4))
+    red = tuple(int(c) for c in np.round(colors.diverging(np.array([1.0]))[0] * 255))
+    blue = tuple(int(c) for c in np.round(colors.diverging(np.array([-1.0]))[0] * 255))
+    # the gradient holds one row of each end colour; a cap adds a filled triangle of it
+    # (about 150 pixels at this size), so the clipped bar has far more of that colour
+    assert _colour_count(over, red) > _colour_count(inside, red) + 50
+    assert _colour_count(under, blue) > _colour_count(inside, blue) + 50
+    assert _colour_count(over, blue) == _colour_count(inside, blue)  # only the clipped end
+    # and the cap says so in words: the label adds light text pixels beside it
+    assert _colour_count(over, (235, 235, 235), 30) > _colour_count(inside, (235, 235, 235), 30)
+
+
+def test_render_explains_the_seam_and_its_tangent_ticks(result, both):
+    img = np.asarray(both.image)
+    x0 = max(p.box[0] + p.box[2] for p in both.panels)
+    column = img[:, x0:]  # the colour-bar column, where the legend sits under the bar
+    for rgb in (colors.SEAM_COLOR, colors.HOST_TANGENT_COLOR, colors.GUEST_TANGENT_COLOR):
+        swatch = tuple(int(round(255 * c)) for c in rgb)
+        # each legend swatch is a line of at least 10 x 2 pixels in exactly its colour
+        assert _colour_count(column, swatch) >= 20, rgb
+    # a picture too small for the legend still renders, with the bar alone
+    small = np.asarray(viz.picture(result, view="side", size=(320, 240)).image)
+    assert small.shape == (240, 320, 3)
+    swatch = tuple(int(round(255 * c)) for c in colors.GUEST_TANGENT_COLOR)
+    assert _colour_count(small[:, small.shape[1] * 8 // 9 :], swatch) == 0
+
+
+def test_mark_regions_outlines_and_names_them(result, both):
+    from igljoin.viz.annotate import LABEL_BOX, OUTLINE, mark_regions, region_boundary
+
+    # two triangles sharing the edge (1, 2): that edge is the region's boundary
+    F = np.array([[0, 1, 2], [1, 3, 2]])
+    assert region_boundary(F, np.array([True, False])).tolist() == [[1, 2]]
+    assert region_boundary(F, np.array([True, True])).shape == (0, 2)
+    with pytest.raises(OptionsError, match="one flag per face"):
+        region_boundary(F, np.array([True]))
+    guest = result.guest
+    half = guest.V[guest.F].mean(axis=1)[:, 2] > np.median(guest.V[:, 2])  # the far half
+    pic = viz.picture(result, view="both", size=(900, 450))
+    before = np.asarray(pic.image).copy()
+    mark_regions(pic, guest, half, ("far half", "near half"))
+    after = np.asarray(pic.image)
+    side, along = pic.panels
+    x, y, w, h = side.box
+    # the outline and two label boxes are drawn on the side panel, nothing on the other
+    assert _colour_count(after[y : y + h, x : x + w], OUTLINE) > _colour_count(
+        before[y : y + h, x : x + w], OUTLINE
+    )
+    assert _colour_count(after[y : y + h, x : x + w], LABEL_BOX) > 200  # two boxes of text
+    x, y, w, h = along.box
+    assert np.array_equal(after[y : y + h, x : x + w], before[y : y + h, x : x + w])
+    with pytest.raises(OptionsError, match="some faces"):
+        mark_regions(pic, guest, np.zeros(len(guest.F), dtype=bool), ("a", "b"))

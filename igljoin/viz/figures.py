@@ -32,9 +32,10 @@ import numpy as np
 
 from ..atomic import atomic_path
 from ..errors import OptionsError
+from ..frames import seam_frames
 from . import colors
 from ._backend import ensure_init, pillow
-from .camera import frame_camera
+from .camera import Camera, frame_camera, project, seam_axes
 from .headless import render_meshes
 from .overlay import _DIM, _TEXT, colour_bar, fonts
 
@@ -67,7 +68,19 @@ ALONG_CONTEXT = 0.1
 #: Tilt of the along-the-seam view towards the side camera (degrees): a grazing view that
 #: shows the guest's colours and the profile through the seam at once.
 ALONG_TILT_DEG = 25.0
-
+#: Scenarios whose rows 2 and 3 get a seam close-up inset. Seen face-on, a patch looks the same
+#: with and without the smooth-join term (the guests differ by under 6 % of their size, mostly
+#: in a band along the seam); the close-up shows the seam where the crease without the term is
+#: sharpest, along the seam's tangent there, so the kink or its absence is in profile.
+SEAM_INSET_SCENARIOS = ("partial_patch",)
+#: The close-up: half the width it frames at the seam (fraction of the guest's size), its
+#: elevation above the host's tangent plane (degrees) and its size (fraction of the panel).
+INSET_HALF_WIDTH = 0.1
+INSET_ELEVATION_DEG = 8.0
+INSET_FRACTION = 0.45
+INSET_FOV_DEG = 30.0
+#: Backing of the inset's label (the figure's background, darker).
+_INSET_LABEL = (28, 29, 33)
 
 
 @dataclass(frozen=True)
@@ -226,6 +239,37 @@ def _column_panels(run: Any, aspect: float, limit: float) -> list[tuple]:
     ]
 
 
+def seam_closeup(run: Any) -> tuple[Camera, int]:
+    """Camera of the seam close-up: along the seam where its crease without the term is sharpest.
+
+    Parameters
+    ----------
+    run : igljoin.demo.SampleRun
+
+    Returns
+    -------
+    camera : Camera
+        Looking along the host curve's tangent at that seam vertex, from
+        :data:`INSET_ELEVATION_DEG` above the host's tangent plane on the
+        side cameras' side, framing :data:`INSET_HALF_WIDTH` of the guest's
+        size on either side of the seam.
+    k : int
+        The seam vertex (index into ``run.smooth.host_curve``).
+    """
+    res = run.smooth
+    k = int(np.argmax(np.nan_to_num(np.asarray(run.plain.crease, dtype=np.float64), nan=-1.0)))
+    frames = seam_frames(res.host.V, res.host.F, res.host_curve, res.closed)
+    p = res.host.V[res.host_curve[k]]
+    normal = frames.normal[k]
+    if normal @ seam_axes(res)["side"] < 0:  # look from the side the overview is seen from
+        normal = -normal
+    e = np.radians(INSET_ELEVATION_DEG)
+    d = np.cos(e) * frames.tangent[k] + np.sin(e) * normal
+    size = float(np.linalg.norm(np.ptp(res.guest.V, axis=0)))
+    dist = INSET_HALF_WIDTH * size / np.tan(np.radians(INSET_FOV_DEG) / 2.0)
+    return Camera(position=p + dist * d, target=p, up=normal, fov_deg=INSET_FOV_DEG), k
+
+
 def _captions(run: Any) -> list[str]:
     # ASCII and the degree sign only: Pillow's built-in font has no en dash and no times sign
     def joined(res: Any) -> str:
@@ -241,6 +285,40 @@ def _captions(run: Any) -> list[str]:
         joined(run.smooth),
         f"mean crease {run.smooth.crease.mean():.2f}\u00b0, seen along the seam",
     ]
+
+
+def _draw_inset(
+    img: Any,
+    draw: Any,
+    panel: tuple,
+    rgb: np.ndarray,
+    point: np.ndarray,
+    cam: Camera,
+    crease: float,
+    font: Any,
+) -> None:
+    """Paste a seam close-up into the panel corner farthest from its spot; ring the spot."""
+    PIL = pillow()
+    x, y, w, h = panel
+    ih, iw = rgb.shape[:2]
+    xy, depth = project(point[None], cam.view_matrix(), cam.fov_deg, w, h)
+    px, py = xy[0]
+    seen = bool(depth[0] > 0 and 0 <= px < w and 0 <= py < h)
+    corners = [(w - iw - 4, h - ih - 4), (4, h - ih - 4), (w - iw - 4, 4), (4, 4)]
+    if seen:  # the corner whose inset centre lies farthest from the spot
+        corners.sort(key=lambda c: -((c[0] + iw / 2 - px) ** 2 + (c[1] + ih / 2 - py) ** 2))
+    ix, iy = x + corners[0][0], y + corners[0][1]
+    img.paste(PIL.Image.fromarray(rgb), (ix, iy))
+    draw.rectangle([ix - 1, iy - 1, ix + iw, iy + ih], outline=_TEXT)
+    step = round(1.15 * getattr(font, "size", 11))
+    lines = ["seam close-up at (o)", f"crease there {crease:.1f}\u00b0"]
+    width = max(draw.textlength(t, font=font) for t in lines)
+    draw.rectangle([ix, iy, ix + width + 8, iy + 6 + step * len(lines)], fill=_INSET_LABEL)
+    for j, text in enumerate(lines):
+        draw.text((ix + 4, iy + 3 + j * step), text, fill=_TEXT, font=font)
+    if seen:
+        r = 6
+        draw.ellipse([x + px - r, y + py - r, x + px + r, y + py + r], outline=_TEXT, width=2)
 
 
 def _vertical_text(img: Any, text: str, box: tuple, font: Any, background: tuple) -> None:
@@ -280,17 +358,29 @@ def paper_figure(runs: Sequence[Any], title: str = "") -> Any:
     limit = scale(deformed)
     data = np.concatenate(deformed)
     shots, background = [], None
+    insets = []  # (row, column, close-up RGB, seam point, overview camera, crease there)
+    iw, ih = round(INSET_FRACTION * pw), round(INSET_FRACTION * ph)
     for col, run in enumerate(runs):
         box = _bounds(run.sample.host, run.sample.guest, run.plain.guest, run.smooth.guest)
-        for row, (host, guest, face_colors, cam) in enumerate(_column_panels(run, pw / ph, limit)):
+        panels = _column_panels(run, pw / ph, limit)
+        for row, (host, guest, face_colors, cam) in enumerate(panels):
             rgb, background = render_meshes(host, guest, face_colors, cam, (pw, ph), bounds=box)
             shots.append((lay.panel(row, col), rgb))
+        if run.sample.scenario in SEAM_INSET_SCENARIOS:
+            close, k = seam_closeup(run)
+            point = run.smooth.host.V[run.smooth.host_curve[k]]
+            for row, res in ((1, run.plain), (2, run.smooth)):
+                host, guest, face_colors, cam = panels[row]
+                rgb, _ = render_meshes(host, guest, face_colors, close, (iw, ih), bounds=box)
+                insets.append((row, col, rgb, point, cam, float(res.crease[k])))
     img = PIL.Image.new("RGB", lay.size, background)
     for (x, y, _, _), rgb in shots:
         img.paste(PIL.Image.fromarray(rgb), (x, y))
     draw = PIL.ImageDraw.Draw(img)
     font, small = fonts(lay.font_size)
     fs = lay.font_size
+    for row, col, rgb, point, cam, crease in insets:
+        _draw_inset(img, draw, lay.panel(row, col), rgb, point, cam, crease, small)
     draw.text((fs // 2, fs // 3), title, fill=_TEXT, font=font)
     draw.text(
         (fs // 2, fs // 3 + round(1.4 * fs)),

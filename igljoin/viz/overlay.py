@@ -16,7 +16,7 @@ import numpy as np
 from . import colors
 from ._backend import pillow
 
-__all__ = ["Layout", "colour_bar", "compose", "figures_line", "fonts", "layout"]
+__all__ = ["Layout", "colour_bar", "compose", "figures_line", "fonts", "layout", "legend"]
 
 #: Minimum picture size (width, height) that leaves room for the title and the colour bar.
 MIN_SIZE = (320, 240)
@@ -112,10 +112,23 @@ def figures_line(result: Any) -> str:
     return "   \u00b7   ".join(parts)
 
 
+def _clipped(data_range: tuple, limit: float) -> tuple[float | None, float | None]:
+    """The data's smallest and largest area ratio where they lie beyond the colour scale."""
+    lo, hi = (v if v is not None and np.isfinite(v) and v > 0 else None for v in data_range)
+    return (lo if lo is not None and lo < 1.0 / limit else None), (
+        hi if hi is not None and hi > limit else None
+    )
+
+
 def colour_bar(
     img: Any, box: tuple[int, int, int, int], font_size: int, limit: float, data_range: tuple
 ) -> None:
     """Draw the area-ratio colour bar with its ticks into ``img`` (in place).
+
+    The data's smallest and largest ratio are marked beside the bar. Where
+    they lie beyond the scale (faces drawn at full colour although they
+    changed more), the bar ends in a pointed cap of that full colour and the
+    mark sits at the cap's tip, labelled with the true value and "clipped".
 
     Parameters
     ----------
@@ -135,8 +148,9 @@ def colour_bar(
     x, y, w, h = box
     fs = font_size
     font, small = fonts(fs)
-    top = y + int(3.2 * fs)
-    bottom = y + h - int(1.6 * fs)
+    cap = max(6, int(0.9 * fs))  # height of a clipping cap
+    top = y + int(3.2 * fs) + cap
+    bottom = y + h - int(2.0 * fs) - cap
     bx0 = x + int(0.9 * fs)
     bx1 = bx0 + max(8, int(1.1 * fs))
     draw.text((x + int(0.5 * fs), y + int(0.4 * fs)), "area ratio", fill=_TEXT, font=font)
@@ -155,13 +169,96 @@ def colour_bar(
         r = row_of(float(tt))
         draw.line([(bx1, r), (bx1 + 4, r)], fill=_TEXT)
         draw.text((bx1 + 7, r), f"{v:.3g}", fill=_TEXT, font=small, anchor="lm")
+    low, high = _clipped(data_range, limit)
+    mid = (bx0 + bx1) / 2
+    for clipped, edge, tip, full in (
+        (high, top - 1, top - cap, 1.0),
+        (low, bottom, bottom + cap, -1.0),
+    ):
+        if clipped is None:
+            continue
+        colour = tuple(int(c) for c in np.round(colors.diverging(np.array([full]))[0] * 255))
+        draw.polygon([(bx0, edge), (bx1, edge), (mid, tip)], fill=colour, outline=_DIM)
+        draw.text((bx1 + 7, tip), f"{clipped:.3g} clipped", fill=_TEXT, font=small, anchor="lm")
     scale = np.log2(limit)
-    for v in data_range:
+    for v, clipped, tip in ((data_range[0], low, bottom + cap), (data_range[1], high, top - cap)):
         if v is None or not np.isfinite(v) or v <= 0:
             continue
-        r = row_of(float(np.clip(np.log2(v) / scale, -1.0, 1.0)))
+        r = tip if clipped is not None else row_of(float(np.clip(np.log2(v) / scale, -1.0, 1.0)))
         draw.polygon([(bx0 - 2, r), (bx0 - 8, r - 4), (bx0 - 8, r + 4)], fill=_TEXT)
-    draw.text((x + int(0.5 * fs), bottom + int(0.35 * fs)), "marks: min/max", fill=_DIM, font=small)
+    draw.text(
+        (x + int(0.5 * fs), bottom + cap + int(0.75 * fs)), "marks: min/max", fill=_DIM, font=small
+    )
+
+
+#: What the tangent ticks tell, under the legend.
+SEAM_NOTE = "ticks: tangents across the seam; aligned = smooth join"
+
+
+def _wrap(draw: Any, text: str, font: Any, width: float) -> list[str]:
+    """``text`` broken into lines no wider than ``width`` pixels (a long word stays whole)."""
+    lines: list[str] = []
+    line = ""
+    for word in text.split():
+        trial = f"{line} {word}".strip()
+        if line and draw.textlength(trial, font=font) > width:
+            lines.append(line)
+            line = word
+        else:
+            line = trial
+    return lines + ([line] if line else [])
+
+
+#: Legend of the seam and its cross-seam tangents (label, colour) under the colour bar.
+SEAM_LEGEND = (
+    ("seam", colors.SEAM_COLOR),
+    ("host tangent", colors.HOST_TANGENT_COLOR),
+    ("guest tangent", colors.GUEST_TANGENT_COLOR),
+)
+
+
+def legend(
+    img: Any,
+    origin: tuple[int, int],
+    font_size: int,
+    entries: tuple = SEAM_LEGEND,
+    note: str = SEAM_NOTE,
+) -> int:
+    """Draw a legend of coloured line samples and labels into ``img`` (in place).
+
+    Parameters
+    ----------
+    img : PIL.Image.Image
+    origin : (int, int)
+        Top-left corner.
+    font_size : int
+        Labels use 0.8 of it.
+    entries : tuple of (str, (float, float, float))
+        Label and RGB in [0, 1] of each line sample.
+    note : str
+        A last line in dim text, wrapped to the width left of the canvas ("" for none).
+
+    Returns
+    -------
+    int
+        The row below the legend.
+    """
+    PIL = pillow()
+    draw = PIL.ImageDraw.Draw(img)
+    _, small = fonts(font_size)
+    x, y = origin
+    step = round(1.2 * font_size)
+    swatch = max(10, font_size)
+    for label, rgb in entries:
+        colour = tuple(int(round(255 * c)) for c in rgb)
+        r = y + step // 2
+        draw.line([(x, r), (x + swatch, r)], fill=colour, width=max(2, font_size // 5))
+        draw.text((x + swatch + 5, r), label, fill=_TEXT, font=small, anchor="lm")
+        y += step
+    for line in _wrap(draw, note, small, img.size[0] - x - 4):
+        draw.text((x, y), line, fill=_DIM, font=small)
+        y += step
+    return y
 
 
 def compose(
@@ -174,8 +271,9 @@ def compose(
     limit: float,
     data_range: tuple,
     background: tuple | None = None,
+    seam_legend: bool = True,
 ) -> Any:
-    """Place rendered RGB views on a canvas with the title band and the colour bar.
+    """Place rendered RGB views on a canvas with the title band, colour bar and legend.
 
     Parameters
     ----------
@@ -193,6 +291,9 @@ def compose(
     background : (int, int, int), optional
         Canvas colour (default :data:`igljoin.viz.colors.BACKGROUND`); give the
         panels' rendered background so that bands and panels match exactly.
+    seam_legend : bool
+        Explain the seam and its tangent ticks (:data:`SEAM_LEGEND`) under
+        the colour bar, where the column has room for it.
 
     Returns
     -------
@@ -211,5 +312,18 @@ def compose(
     draw.text((int(0.6 * fs), int(0.4 * fs) + round(1.35 * fs)), subtitle, fill=_DIM, font=small)
     for (x, y, _, _), caption in zip(lay.panels, captions):
         draw.text((x + int(0.6 * fs), y + int(0.3 * fs)), caption, fill=_DIM, font=small)
-    colour_bar(img, lay.bar, lay.font_size, limit, data_range)
+    bx, by, bw, bh = lay.bar
+    step = round(1.2 * fs)
+    left = bx + int(0.5 * fs)
+    note = _wrap(draw, SEAM_NOTE, small, lay.size[0] - left - 4)
+    rows = len(SEAM_LEGEND) + len(note) + 1  # entries, the wrapped note, a gap above
+    labels = max(draw.textlength(label, font=small) for label, _ in SEAM_LEGEND)
+    words = max(draw.textlength(line, font=small) for line in note)
+    room = lay.size[0] - left - 4  # to the canvas edge
+    fits = max(max(10, fs) + 5 + labels, words) <= room and bh >= 12 * fs + rows * step
+    if seam_legend and fits:
+        colour_bar(img, (bx, by, bw, bh - rows * step), fs, limit, data_range)
+        legend(img, (left, by + bh - (rows - 1) * step), fs)
+    else:
+        colour_bar(img, lay.bar, fs, limit, data_range)
     return img
