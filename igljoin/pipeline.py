@@ -57,7 +57,7 @@ from . import __version__
 from .atomic import atomic_write_text, fsync_dir
 from .boundary import Curve, select_curve
 from .errors import IgljoinError, OptionsError, SpecError, WeldError, missing_extra
-from .io import read_mesh
+from .io import output_formats, read_mesh
 from .join import JoinSolver
 from .spec import CaseSpec, discover_cases, file_sha256, load_case
 
@@ -282,7 +282,7 @@ def solve_case(spec: CaseSpec, *, step: _Step | None = None, progress: Any = Non
 
 
 def _write_outputs(
-    solved: SolvedCase, inputs: dict, tmp: Path, snapshots: bool, step: _Step
+    solved: SolvedCase, inputs: dict, tmp: Path, snapshots: bool, step: _Step, formats=None
 ) -> tuple[dict, dict]:
     """Save a solved case into the folder ``tmp``; return (report, timings)."""
     spec, result = solved.spec, solved.result
@@ -291,10 +291,10 @@ def _write_outputs(
     step.name = "save"
     warnings: list[str] = []
     try:
-        paths = result.save(tmp)
+        paths = result.save(tmp, formats=formats)
     except WeldError as exc:
         warnings.append(f"merged.ply not written: {exc}")
-        paths = result.save(tmp, merged=False)
+        paths = result.save(tmp, merged=False, formats=formats)
     report = json.loads(paths["report"].read_text(encoding="utf-8"))
     timings["solver"] = report.pop("timings", {})
     metrics = report.get("metrics", {})
@@ -411,6 +411,7 @@ def run_case(
     snapshots: bool = False,
     record_errors: bool = True,
     progress: Any = None,
+    formats=None,
 ) -> dict:
     """Run one case and write its output folder atomically.
 
@@ -433,6 +434,9 @@ def run_case(
     progress : callable, optional
         Called with an :class:`igljoin.SolveProgress` after every iteration
         of the join (see :meth:`igljoin.JoinSolver.solve`).
+    formats : str or iterable of str, optional
+        Mesh formats of the outputs (default ``("ply", "vtu")``; see
+        :meth:`igljoin.JoinResult.save`).
 
     Returns
     -------
@@ -461,7 +465,7 @@ def run_case(
             step.name = "read"
             inputs = spec.input_hashes()
             solved = solve_case(spec, step=step, progress=progress)
-            _, timings = _write_outputs(solved, inputs, tmp, snapshots, step)
+            _, timings = _write_outputs(solved, inputs, tmp, snapshots, step, formats)
             timings["total"] = time.perf_counter() - start
             atomic_write_text(tmp / TIMINGS, _json_text(timings))
         except Exception as exc:  # any failure of the case is recorded, not raised
@@ -726,7 +730,12 @@ def _init_worker() -> None:
 
 def _case_task(payload: dict) -> dict:
     """Executor task: run one case (module-level so that workers can import it)."""
-    return run_case(payload["case"], payload["out"], snapshots=payload["snapshots"])
+    return run_case(
+        payload["case"],
+        payload["out"],
+        snapshots=payload["snapshots"],
+        formats=payload.get("formats"),
+    )
 
 
 @contextlib.contextmanager
@@ -885,6 +894,7 @@ def run_batch(
     resume: bool = False,
     progress: bool = True,
     snapshots: bool = False,
+    formats=None,
 ) -> BatchSummary:
     """Run every case folder under ``cases_dir`` and write outputs and a summary.
 
@@ -917,6 +927,9 @@ def run_batch(
         Show a progress bar (tqdm, on stderr; only when stderr is a terminal).
     snapshots : bool, optional
         Also render ``snapshot.png`` per case with :func:`igljoin.viz.render`.
+    formats : str or iterable of str, optional
+        Mesh formats of each case's outputs (default ``("ply", "vtu")``; see
+        :meth:`igljoin.JoinResult.save`).
 
     Returns
     -------
@@ -946,6 +959,7 @@ def run_batch(
     'all 10 cases ok'
     """
     start = time.perf_counter()
+    formats = None if formats is None else output_formats(formats)
     cases = discover_cases(cases_dir)
     names = [c.name for c in cases]
     dupes = sorted({n for n in names if names.count(n) > 1})
@@ -977,6 +991,7 @@ def run_batch(
                                 "case": str(case),
                                 "out": str(out / case.name),
                                 "snapshots": bool(snapshots),
+                                "formats": formats,
                             }
                             futures[ex.submit(_case_task, payload)] = case
                     for fut in cf.as_completed(futures):

@@ -140,7 +140,9 @@ def test_join_files(patch_files, tmp_path):
     assert "converged: True" in proc.stdout and "crease mean" in proc.stdout
     assert sorted(p.name for p in out.iterdir()) == [
         "guest.ply",
+        "guest.vtu",
         "merged.ply",
+        "merged.vtu",
         "report.json",
         "timings.json",
     ]
