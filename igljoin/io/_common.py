@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import re
+import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -27,7 +27,14 @@ INDEX_LIMIT = 2**62
 Arrays = tuple[np.ndarray, np.ndarray, dict, dict]
 
 # Whitespace that Python's str.split() knows in Latin-1 text but bytes.split() does not.
-ODD_SPACE = re.compile(rb"[\x0b\x0c\x1c-\x1f\x85\xa0]")
+_ODD_SPACE = b"\x0b\x0c\x1c\x1d\x1e\x1f\x85\xa0"
+
+
+def has_odd_space(data: bytes) -> bool:
+    """True if ``data`` holds whitespace other than space, tab, CR and LF."""
+    return len(data.translate(None, _ODD_SPACE)) != len(data)
+
+
 _SPACE = np.zeros(256, dtype=bool)
 _SPACE[[9, 10, 13, 32]] = True
 
@@ -149,24 +156,68 @@ def text_chunks(
             number += _line_breaks(chunk)
 
 
-def token_counts(blob: bytes, n_lines: int) -> np.ndarray:
-    """Whitespace-separated tokens on each ``\\n``-separated line of ``blob``, shape (n_lines,)."""
+def byte_table(chars: bytes) -> np.ndarray:
+    """A (256,) bool lookup table, True for the bytes in ``chars``."""
+    table = np.zeros(256, dtype=bool)
+    table[list(chars)] = True
+    return table
+
+
+#: Bytes of numbers in Python's float syntax (digits, sign, point, exponent, nan/inf/infinity).
+FLOAT_BYTES = byte_table(b"0123456789eE+-.nNaAiIfFtTyY \t\n")
+#: Bytes of integers.
+INT_BYTES = byte_table(b"0123456789- \t\n")
+
+
+def scan(blob: bytes, allowed: np.ndarray) -> tuple[np.ndarray, int] | None:
+    """Tokens per line and the longest token of ``\n``-separated lines of ``blob``.
+
+    Parameters
+    ----------
+    blob : bytes
+        Lines joined by ``\n`` (no trailing newline), tokens separated by
+        spaces or tabs.
+    allowed : ndarray of bool, shape (256,)
+        Bytes that may occur (see :func:`byte_table`).
+
+    Returns
+    -------
+    (counts, longest) or None
+        ``counts`` of shape (lines,), or None if a byte outside ``allowed``
+        occurs.
+    """
     b = np.frombuffer(blob, dtype=np.uint8)
+    if not b.size:
+        return np.zeros(0, dtype=np.int64), 0
+    if not allowed[b].all():
+        return None
     space = _SPACE[b]
     start = ~space
     start[1:] &= space[:-1]
-    line = np.cumsum(b == 10)
-    return np.bincount(line[start], minlength=n_lines)
+    end = ~space
+    end[:-1] &= space[1:]
+    starts, ends = np.flatnonzero(start), np.flatnonzero(end)
+    longest = int((ends - starts).max()) + 1 if starts.size else 0
+    before = np.searchsorted(starts, np.flatnonzero(b == 10))
+    return np.diff(before, prepend=0, append=starts.size), longest
 
 
-def parse_numbers(tokens: list[bytes], dtype) -> np.ndarray | None:
-    """Tokens as numbers (Python's ``float``/``int`` syntax), or None if any is not one."""
-    if not tokens:
+def parse_numbers(blob: bytes, dtype, expected: int) -> np.ndarray | None:
+    """The whitespace-separated numbers of ``blob``, or None unless exactly ``expected`` parse.
+
+    Callers first restrict the bytes (:func:`scan`) so that numpy's parser
+    accepts exactly Python's ``float`` / ``int`` syntax, and integers to at
+    most 18 digits (numpy saturates longer ones).
+    """
+    if expected == 0:
         return np.empty(0, dtype=dtype)
     try:
-        return np.array(tokens).astype(dtype)
-    except (ValueError, OverflowError):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", DeprecationWarning)
+            values = np.fromstring(blob, dtype=dtype, sep=" ")
+    except (ValueError, DeprecationWarning):
         return None
+    return values if values.size == expected else None
 
 
 def first_columns(values: np.ndarray, counts: np.ndarray, k: int) -> np.ndarray:

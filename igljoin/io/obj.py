@@ -16,23 +16,24 @@ import numpy as np
 
 from ..mesh import Mesh
 from ._common import (
+    FLOAT_BYTES,
     INDEX_LIMIT,
-    ODD_SPACE,
+    INT_BYTES,
     Arrays,
+    byte_table,
     error,
     fan_triangulate,
     first_columns,
     guard_error,
+    has_odd_space,
     max_elements,
     parse_numbers,
+    scan,
     split_lines,
     text_chunks,
-    token_counts,
 )
 
-_NOT_FLOAT = re.compile(rb"[^0-9eE+\-.nNaAiIfFtTyY \t\n]")
-_NOT_CORNER = re.compile(rb"[^0-9\-/ \t\n]")
-_LONG_NUMBER = re.compile(rb"[0-9]{19}")
+_CORNER_BYTES = byte_table(b"0123456789-/ \t\n")
 _AFTER_SLASH = re.compile(rb"/\S*")
 _BLANK = np.zeros(256, dtype=bool)
 _BLANK[[9, 32]] = True
@@ -176,7 +177,7 @@ def _blob(lines: list[bytes], rows: np.ndarray, key: bytes) -> bytes | None:
 
 def _fast(state: _State, first: int, data: bytes) -> bool:
     """Parse a block of plain records; False (nothing changed) if it needs the reference parser."""
-    if state.pending or b"\\" in data or ODD_SPACE.search(data):
+    if state.pending or b"\\" in data or has_odd_space(data):
         return False
     lines = split_lines(data)
     kinds = np.array(lines, dtype="S2")
@@ -193,26 +194,27 @@ def _fast(state: _State, first: int, data: bytes) -> bool:
         return False  # the reference parser stops at the exact line
     vblob = _blob(lines, v_rows, b"v")
     fblob = _blob(lines, f_rows, b"f")
-    if vblob is None or fblob is None or _NOT_FLOAT.search(vblob):
+    if vblob is None or fblob is None:
         return False
-    if _NOT_CORNER.search(fblob) or _LONG_NUMBER.search(fblob):
+    v_scan, f_scan = scan(vblob, FLOAT_BYTES), scan(fblob, _CORNER_BYTES)
+    if v_scan is None or f_scan is None:
         return False
-    v_counts = token_counts(vblob, v_rows.size)
-    f_counts = token_counts(fblob, f_rows.size)
+    (v_counts, _), (f_counts, longest) = v_scan, f_scan
     if (v_counts < 3).any() or (f_counts < 3).any():
         return False
     if state.n_triangles + int((f_counts - 2).sum()) > limit:
         return False
-    values = parse_numbers(vblob.split(), np.float64)
-    if values is None:
-        return False
     if b"/" in fblob:
         fblob = _AFTER_SLASH.sub(b"", fblob)
-    tokens = fblob.split()
-    if len(tokens) != int(f_counts.sum()):
-        return False  # a corner such as '/2' has no vertex index
-    corners = parse_numbers(tokens, np.int64)
-    if corners is None or (corners == 0).any():
+        f_scan = scan(fblob, INT_BYTES)
+        if f_scan is None or f_scan[0].sum() != f_counts.sum():
+            return False  # a corner such as '/2' has no vertex index
+        longest = f_scan[1]
+    if longest > 18:
+        return False  # numpy would saturate; the reference reports the index
+    values = parse_numbers(vblob, np.float64, int(v_counts.sum()))
+    corners = parse_numbers(fblob, np.int64, int(f_counts.sum()))
+    if values is None or corners is None or (corners == 0).any():
         return False
     seen = state.n_vertices + np.cumsum(is_v)[f_rows]
     index = np.where(corners > 0, corners - 1, np.repeat(seen, f_counts) + corners)

@@ -14,23 +14,23 @@ import numpy as np
 
 from ..mesh import Mesh
 from ._common import (
+    FLOAT_BYTES,
     INDEX_LIMIT,
-    ODD_SPACE,
+    INT_BYTES,
     Arrays,
     error,
     fan_triangulate,
     first_columns,
     guard_error,
+    has_odd_space,
     max_elements,
     parse_numbers,
+    scan,
     split_lines,
     text_chunks,
-    token_counts,
 )
 
-_NOT_FLOAT = re.compile(rb"[^0-9eE+\-.nNaAiIfFtTyY \t\n]")
-_NOT_INT = re.compile(rb"[^0-9\- \t\n]")
-_LONG_NUMBER = re.compile(rb"[0-9]{19}")
+_LINE = re.compile(rb"[^\r\n]*(?:\r\n|\r|\n)?")
 # Shortest records: "x y z\n" is 6 bytes, "3 a b c\n" 8 bytes.
 _MIN_VERTEX_BYTES, _MIN_FACE_BYTES = 6, 8
 
@@ -185,21 +185,21 @@ def _slow(path: Path, state: _State, first: int, data: bytes) -> None:
 
 def _fast(state: _State, data: bytes) -> bool:
     """Parse a block of plain data lines; False (nothing changed) if it needs the reference."""
-    if state.stage != "data" or b"#" in data or ODD_SPACE.search(data):
+    if state.stage != "data" or b"#" in data or has_odd_space(data):
         return False
     records = [line for line in split_lines(data) if line and not line.isspace()]
     n_vertex = min(state.vertices_left, len(records))
     n_face = min(state.faces_left, len(records) - n_vertex)
     vblob = b"\n".join(records[:n_vertex])
     fblob = b"\n".join(records[n_vertex : n_vertex + n_face])
-    if _NOT_FLOAT.search(vblob) or _NOT_INT.search(fblob) or _LONG_NUMBER.search(fblob):
-        return False
-    v_counts = token_counts(vblob, n_vertex)
-    f_counts = token_counts(fblob, n_face)
+    v_scan, f_scan = scan(vblob, FLOAT_BYTES), scan(fblob, INT_BYTES)
+    if v_scan is None or f_scan is None or f_scan[1] > 18:
+        return False  # other bytes, or integers numpy would saturate
+    v_counts, f_counts = v_scan[0], f_scan[0]
     if (v_counts < 3).any():
         return False
-    values = parse_numbers(vblob.split(), np.float64)
-    numbers = parse_numbers(fblob.split(), np.int64)
+    values = parse_numbers(vblob, np.float64, int(v_counts.sum()))
+    numbers = parse_numbers(fblob, np.int64, int(f_counts.sum()))
     if values is None or numbers is None:
         return False
     starts = np.cumsum(f_counts) - f_counts
@@ -221,11 +221,25 @@ def _fast(state: _State, data: bytes) -> bool:
     return True
 
 
+def _header(path: Path, state: _State, first: int, data: bytes) -> tuple[int, bytes]:
+    """Feed lines to the reference parser until the header is read; return the rest."""
+    pos = 0
+    while state.stage != "data" and pos < len(data):
+        end = _LINE.match(data, pos).end()
+        line = data[pos:end]
+        _slow(path, state, first, line)
+        first += line.endswith((b"\n", b"\r"))
+        pos = end
+    return first, data[pos:]
+
+
 def read(path: Path) -> Arrays:
     """Read an ASCII OFF file (also COFF/NOFF/...: extra per-vertex values are ignored)."""
     state = _State()
     for first, data in text_chunks(path, "OFF"):
-        if not _fast(state, data):
+        if state.stage != "data":
+            first, data = _header(path, state, first, data)
+        if data and not _fast(state, data):
             _slow(path, state, first, data)
     if state.stage == "keyword":
         _keyword(path, state, [])

@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import re
 import warnings
 from collections.abc import Mapping
 from pathlib import Path
@@ -23,14 +22,15 @@ import plyfile
 from ..errors import MeshError, MeshReadError
 from ..mesh import Mesh
 from ._common import (
+    FLOAT_BYTES,
     Arrays,
     attribute_name,
     error,
     fan_triangulate,
     max_elements,
     parse_numbers,
+    scan,
     split_lines,
-    token_counts,
 )
 
 _FACE_LIST_NAMES = ("vertex_indices", "vertex_index")
@@ -42,7 +42,6 @@ _PLY_TYPES = {
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }  # fmt: skip
 _PLY_NAMES = {"i1": "char", "u1": "uchar", "i4": "int", "f8": "double"}
-_NOT_NUMBER = re.compile(rb"[^0-9eE+\-.nNaAiIfFtTyY \t\n]")
 
 
 def _ply_parse(path: Path, fast: bool, text: bool) -> plyfile.PlyData:
@@ -375,9 +374,10 @@ def _typed(column: np.ndarray, dtype: str) -> np.ndarray | None:
 def _table(block: list[bytes], width: int) -> np.ndarray | None:
     """Rows of ``width`` numbers (float64, shape (rows, width)), or None if not exactly that."""
     blob = b"\n".join(block)
-    if _NOT_NUMBER.search(blob) or not (token_counts(blob, len(block)) == width).all():
+    scanned = scan(blob, FLOAT_BYTES)
+    if scanned is None or not (scanned[0] == width).all():
         return None
-    values = parse_numbers(blob.split(), np.float64)
+    values = parse_numbers(blob, np.float64, len(block) * width)
     return None if values is None else values.reshape(len(block), width)
 
 

@@ -16,10 +16,11 @@ import numpy as np
 from ..errors import MeshError
 from ..mesh import Mesh
 from ._common import (
-    ODD_SPACE,
+    FLOAT_BYTES,
     Arrays,
     error,
     guard_error,
+    has_odd_space,
     max_elements,
     merge_vertices,
     parse_numbers,
@@ -127,7 +128,7 @@ def _slow(path: Path, state: _State, first: int, data: bytes) -> None:
 
 def _fast(path: Path, state: _State, first: int, data: bytes) -> bool:
     """Parse the plain facets of a block (its head and tail lines go to the reference)."""
-    if state.in_loop or ODD_SPACE.search(data):
+    if state.in_loop or has_odd_space(data):
         return False
     start = data.find(b"facet")
     stop = data.rfind(b"endfacet")
@@ -145,7 +146,10 @@ def _fast(path: Path, state: _State, first: int, data: bytes) -> bool:
         return False
     if state.n_corners + 3 * facets > 3 * max_elements():
         return False
-    coords = [parse_numbers(tokens[j::21], np.float64) for j in _COORDS]
+    blobs = [b" ".join(tokens[j::21]) for j in _COORDS]
+    if any(not FLOAT_BYTES[np.frombuffer(blob, dtype=np.uint8)].all() for blob in blobs):
+        return False
+    coords = [parse_numbers(blob, np.float64, facets) for blob in blobs]
     if any(c is None for c in coords):
         return False
     _slow(path, state, first, head)
