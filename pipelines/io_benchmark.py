@@ -25,6 +25,7 @@ import statistics
 import sys
 import tempfile
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -89,7 +90,7 @@ def run(repeats: int) -> list[dict]:
     with tempfile.TemporaryDirectory() as tmp:
         for label, name, m, kwargs, module in cases:
             path = Path(tmp) / name
-            write = _median_seconds(lambda: write_mesh(path, m, **kwargs), max(1, repeats // 2))
+            write = _median_seconds(partial(write_mesh, path, m, **kwargs), max(1, repeats // 2))
             row = {
                 "format": label,
                 "vertices": m.n_vertices,
@@ -100,15 +101,15 @@ def run(repeats: int) -> list[dict]:
             if name.endswith((".obj", ".off", ".stl", ".ply")):
                 back = read_mesh(path)
                 assert back.n_faces == m.n_faces and back.n_vertices == m.n_vertices, label
-                row["read_s"] = round(_median_seconds(lambda: read_mesh(path), repeats), 3)
-                cpu = _median_seconds(lambda: read_mesh(path), repeats, time.process_time)
+                row["read_s"] = round(_median_seconds(partial(read_mesh, path), repeats), 3)
+                cpu = _median_seconds(partial(read_mesh, path), repeats, time.process_time)
                 row["read_cpu_s"] = round(cpu, 3)
             if module is not None:
                 reference = _reference(module, path)
                 np.testing.assert_array_equal(reference.V, back.V)
                 np.testing.assert_array_equal(reference.F, back.F)
                 row["reference_read_s"] = round(
-                    _median_seconds(lambda: _reference(module, path), 1), 3
+                    _median_seconds(partial(_reference, module, path), 1), 3
                 )
             rows.append(row)
             print(row, file=sys.stderr)
