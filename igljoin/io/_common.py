@@ -127,14 +127,21 @@ def text_chunks(
     ------
     (int, bytes)
         The 1-based number of the block's first line and the block. Memory
-        held is at most :data:`CHUNK_BYTES` plus one unfinished line.
+        held is at most :data:`CHUNK_BYTES` plus one unfinished line. At a
+        NUL byte the complete lines before it are yielded, then the binary
+        error is raised.
     """
     number = 1
     carry = b""
     with open(path, "rb") as fh:
         while True:
             block = fh.read(CHUNK_BYTES)
-            if b"\0" in block:
+            nul = block.find(b"\0")
+            if nul >= 0:  # the complete lines before it are still read (and checked) first
+                data = carry + block[:nul]
+                end = _last_break(data, None)
+                if end:
+                    yield number, data[:end]
                 raise (on_binary or (lambda: binary_text_error(path, fmt)))()
             data = carry + block if carry else block
             if not block:
@@ -146,7 +153,7 @@ def text_chunks(
                 if len(data) > MAX_LINE_BYTES:
                     raise error(
                         path,
-                        f"line {number} is longer than {MAX_LINE_BYTES >> 20} MiB",
+                        f"line {number} is longer than {MAX_LINE_BYTES:,} bytes",
                         f"the file is corrupt or not an {fmt} file; re-export it",
                     )
                 carry = data
