@@ -247,3 +247,32 @@ def test_cli_formats_flag(tmp_path, capsys):
         main(["join", str(host), str(guest), "-o", str(tmp_path / "x"), "--formats", "gltf"])
     assert info.value.code == 2
     assert "argument --formats: unknown output format 'gltf'" in capsys.readouterr().err
+
+
+def test_batch_formats_reach_every_case(tmp_path):
+    """run_batch(formats=...) (igljoin batch --formats) passes the formats to each case."""
+    from igljoin.pipeline import run_batch
+
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.4)
+    case = tmp_path / "cases" / "one"
+    case.mkdir(parents=True)
+    write_mesh(case / "host.ply", s.host)
+    write_mesh(case / "guest.obj", s.guest)
+    (case / "join.toml").write_text("[host_curve]\nloop = 0\n", encoding="utf-8")
+    summary = run_batch(
+        tmp_path / "cases", tmp_path / "out", workers=0, formats="vtk,ply", progress=False
+    )
+    assert summary.ok, summary.message()
+    names = sorted(p.name for p in (tmp_path / "out" / "one").iterdir())
+    assert names == [
+        "guest.ply",
+        "guest.vtk",
+        "merged.ply",
+        "merged.vtk",
+        "report.json",
+        "timings.json",
+    ]
+    merged = meshio.read(tmp_path / "out" / "one" / "merged.vtk")
+    assert {"label", "source_face", "area_ratio"} <= set(merged.cell_data)
+    with pytest.raises(OptionsError, match="unknown output format 'png'"):
+        run_batch(tmp_path / "cases", tmp_path / "out2", workers=0, formats="png")
