@@ -383,9 +383,8 @@ def _table(block: list[bytes], width: int) -> np.ndarray | None:
 
 def _read_ascii_fast(path: Path) -> Arrays | None:
     """Vertices, triangles and scalar properties of a plain ASCII PLY, or None (use plyfile)."""
-    _check_ply_start(path)
-    if path.stat().st_size > _FAST_ASCII_BYTES:
-        return None
+    if not _check_ply_start(path) or path.stat().st_size > _FAST_ASCII_BYTES:
+        return None  # binary (memory-mapped by plyfile), or too large to hold whole
     with open(path, "rb") as fh:
         data = fh.read()
     parsed = _ascii_header(data)
