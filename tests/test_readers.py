@@ -247,3 +247,17 @@ def test_merge_vertices_equals_numpy_unique(monkeypatch):
     V, F = _common.merge_vertices(P)
     np.testing.assert_array_equal(V, want_V)
     np.testing.assert_array_equal(F, want_F)
+
+
+@pytest.mark.parametrize("keep", [0, 1, 2, 3])
+def test_ascii_ply_with_missing_rows_is_truncated(tmp_path, keep):
+    """Fewer rows than the header declares go to plyfile, which reports the truncation."""
+    rows = ["0 0 0", "1 0 0", "0 1 0", "3 0 1 2"][:keep]
+    header = (
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+    )
+    path = tmp_path / "cut.ply"
+    path.write_text(header + "".join(r + "\n" for r in rows))
+    with pytest.raises(MeshReadError, match="is truncated"):
+        read_mesh(path)

@@ -282,7 +282,7 @@ def test_seam_off_the_host_curve_is_reported_not_raised(small, tmp_path):
         moved.save(tmp_path / "out")
     assert not (tmp_path / "out").exists()  # nothing written when the weld fails
     paths = moved.save(tmp_path / "out", merged=False)
-    assert set(paths) == {"guest", "report"}
+    assert set(paths) == {"guest", "guest_vtu", "report"}
 
 
 def test_duplicated_seam_face_is_non_manifold(small):

@@ -406,8 +406,8 @@ def _read_ascii_fast(path: Path) -> Arrays | None:
     if any(len(p) != 2 for p in fprops[1:]) or np.dtype(fprops[0][3]).kind not in "iu":
         return None
     lines = split_lines(data[offset:])
-    if any(line.strip() for line in lines[n_v + n_f :]):
-        return None
+    if len(lines) < n_v + n_f or any(line.strip() for line in lines[n_v + n_f :]):
+        return None  # truncated, or more than the header declares: plyfile reports it
     vtable = _table(lines[:n_v], len(vprops))
     ftable = _table(lines[n_v : n_v + n_f], 4 + len(fprops) - 1)
     if vtable is None or ftable is None or not (ftable[:, 0] == 3).all():
