@@ -5,9 +5,10 @@
 * ASCII PLY whose header is a plain ``vertex`` + ``face`` layout (scalar
   properties, one face list of triangles) is parsed with vectorised numpy;
   anything else goes to plyfile, which also gives every error message.
-* Writing: binary little-endian through plyfile, or ASCII with
-  :func:`numpy.savetxt` (``%.17g``, exact), which is about 30 times faster
-  than plyfile's ASCII writer.
+* Writing: binary little-endian from packed numpy records, or ASCII with
+  :func:`numpy.savetxt` (``%.17g``, exact); both are many times faster than
+  plyfile's writer (0.02 s against 0.9 s binary, 1.4 s against 14 s ASCII,
+  on the 90k-vertex benchmark grid).
 """
 
 from __future__ import annotations
@@ -304,24 +305,6 @@ def _structured(columns: list, count: int) -> np.ndarray:
     return out
 
 
-def _ply_document(mesh: Mesh, binary: bool) -> plyfile.PlyData:
-    """Build the plyfile document: vertex x, y, z (f8) + attributes; face indices + attributes."""
-    vertex_cols = [(c, "f8", mesh.V[:, j]) for j, c in enumerate("xyz")]
-    vertex_cols += _ply_columns(mesh.vertex_attributes, mesh.n_vertices, "vertex", {"x", "y", "z"})
-    face_cols = [("vertex_indices", "i4", mesh.F)]
-    face_cols += _ply_columns(mesh.face_attributes, mesh.n_faces, "face", {"vertex_indices"})
-    vertex = plyfile.PlyElement.describe(_structured(vertex_cols, mesh.n_vertices), "vertex")
-    face = plyfile.PlyElement.describe(
-        _structured(face_cols, mesh.n_faces),
-        "face",
-        len_types={"vertex_indices": "u1"},
-        val_types={"vertex_indices": "i4"},
-    )
-    return plyfile.PlyData(
-        [vertex, face], text=not binary, byte_order="<", comments=["written by igljoin"]
-    )
-
-
 # --------------------------------------------------------------------------- ASCII fast paths
 
 _FAST_ASCII_BYTES = 1 << 31  # larger ASCII files are left to plyfile's streaming reader
@@ -426,8 +409,8 @@ def _read_ascii_fast(path: Path) -> Arrays | None:
     return V, faces.astype(np.int64).reshape(-1, 3), vattrs, fattrs
 
 
-def _ascii_header_text(mesh: Mesh, vertex_cols: list, face_cols: list) -> str:
-    lines = ["ply", "format ascii 1.0", "comment written by igljoin"]
+def _header_text(mesh: Mesh, vertex_cols: list, face_cols: list, encoding: str) -> str:
+    lines = ["ply", f"format {encoding} 1.0", "comment written by igljoin"]
     lines.append(f"element vertex {mesh.n_vertices}")
     lines += [f"property {_PLY_NAMES[t]} {name}" for name, t, _ in vertex_cols]
     lines.append(f"element face {mesh.n_faces}")
@@ -443,7 +426,7 @@ def _write_ascii(tmp: Path, mesh: Mesh) -> None:
     face_cols = _ply_columns(mesh.face_attributes, mesh.n_faces, "face", {"vertex_indices"})
     spec = {"f8": "%.17g", "i4": "%d", "u1": "%d"}
     with open(tmp, "w", encoding="ascii", newline="\n") as fh:
-        fh.write(_ascii_header_text(mesh, vertex_cols, face_cols))
+        fh.write(_header_text(mesh, vertex_cols, face_cols, "ascii"))
         table = np.column_stack([np.asarray(v, dtype=np.float64) for _, _, v in vertex_cols])
         np.savetxt(fh, table, fmt=[spec[t] for _, t, _ in vertex_cols])
         corners = np.column_stack([np.full(mesh.n_faces, 3), mesh.F])
@@ -453,10 +436,24 @@ def _write_ascii(tmp: Path, mesh: Mesh) -> None:
         np.savetxt(fh, np.hstack(columns), fmt=fmt)
 
 
+def _write_binary(tmp: Path, mesh: Mesh) -> None:
+    """Binary little-endian PLY: one packed numpy record per vertex and per face."""
+    vertex_cols = [(c, "f8", mesh.V[:, j]) for j, c in enumerate("xyz")]
+    vertex_cols += _ply_columns(mesh.vertex_attributes, mesh.n_vertices, "vertex", {"x", "y", "z"})
+    face_cols = _ply_columns(mesh.face_attributes, mesh.n_faces, "face", {"vertex_indices"})
+    little = [(name, "<" + t, values) for name, t, values in vertex_cols]
+    faces = [("count", "u1", np.full(mesh.n_faces, 3)), ("vertex_indices", "<i4", mesh.F)]
+    faces += [(name, "<" + t, values) for name, t, values in face_cols]
+    with open(tmp, "wb") as fh:
+        fh.write(_header_text(mesh, vertex_cols, face_cols, "binary_little_endian").encode())
+        fh.write(_structured(little, mesh.n_vertices).tobytes())
+        fh.write(_structured(faces, mesh.n_faces).tobytes())
+
+
 def write(tmp: Path, mesh: Mesh, binary: bool) -> None:
-    """Write PLY: binary little-endian through plyfile, or ASCII."""
+    """Write PLY, binary little-endian or ASCII (same header, same property types)."""
     if binary:
-        _ply_document(mesh, binary=True).write(str(tmp))
+        _write_binary(tmp, mesh)
     else:
         _write_ascii(tmp, mesh)
 
