@@ -176,6 +176,20 @@ def _add_curve_flags(p: argparse.ArgumentParser) -> None:
         )
 
 
+def _formats(text: str) -> tuple[str, ...]:
+    """``--formats`` value: comma-separated output formats (checked by igljoin.io)."""
+    from .errors import OptionsError
+    from .io import output_formats
+
+    try:
+        return output_formats(text)
+    except OptionsError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+_FORMATS_HELP = "output mesh formats, comma-separated (default: ply,vtu; also vtk, obj, off, stl)"
+
+
 def _add_option_flags(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("join options")
     g.add_argument(
@@ -238,8 +252,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "join",
         help="join one guest mesh file to one host mesh file",
-        description="Join GUEST to HOST and write guest.ply, merged.ply, report.json and "
-        "timings.json into the folder OUT (replaced only once complete).",
+        description="Join GUEST to HOST and write guest.ply, merged.ply, guest.vtu, merged.vtu, "
+        "report.json and timings.json into the folder OUT (replaced only once complete).",
         epilog="example:\n  igljoin join host.ply guest.obj -o out/j1 --host-loop 0 "
         "--guest-start 0.5,1,2 -O smooth_weight=5",
         formatter_class=_Formatter,
@@ -253,6 +267,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--snapshot", action="store_true", help="also render OUT/snapshot.png (needs the viz extra)"
     )
     p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
+    p.add_argument("--formats", type=_formats, metavar="LIST", help=_FORMATS_HELP)
     p.add_argument(
         "--no-progress",
         action="store_true",
@@ -301,6 +316,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="also render snapshot.png per case (needs the viz extra)",
     )
+    p.add_argument("--formats", type=_formats, metavar="LIST", help=_FORMATS_HELP)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     p.set_defaults(func=_cmd_batch, parser=p)
@@ -603,7 +619,12 @@ def _cmd_join(parser, args) -> int:
         status.begin(f"{PROG}: reading, checking and factoring (large guests take a while)")
     try:
         row = run_case(
-            spec, args.out, snapshots=args.snapshot, record_errors=False, progress=status
+            spec,
+            args.out,
+            snapshots=args.snapshot,
+            record_errors=False,
+            progress=status,
+            formats=args.formats,
         )
     finally:
         if status is not None:
@@ -634,6 +655,7 @@ def _cmd_batch(parser, args) -> int:
         resume=args.resume,
         progress=not args.no_progress,
         snapshots=args.snapshots,
+        formats=args.formats,
     )
     if args.json:
         _print_json(summary.to_json())

@@ -66,7 +66,7 @@ from . import __version__
 from .atomic import atomic_write_text
 from .boundary import Curve, select_curve
 from .errors import IgljoinError, OptionsError, OutputError, SpecError, missing_extra
-from .io import read_mesh
+from .io import WRITE_SUFFIXES, output_formats, read_mesh
 from .join import JoinSolver
 from .outputs import (
     MANIFEST,
@@ -143,7 +143,13 @@ ROW_FIELDS = (
 )
 
 #: Every file name a case folder may receive (checked before a case runs).
-CASE_FILES = ("guest.ply", "merged.ply", REPORT, TIMINGS, ERROR, SNAPSHOT)
+CASE_FILES = (
+    *(f"{stem}{suffix}" for stem in ("guest", "merged") for suffix in WRITE_SUFFIXES),
+    REPORT,
+    TIMINGS,
+    ERROR,
+    SNAPSHOT,
+)
 #: Outputs a successful case must have (``resume`` redoes a case missing one).
 REQUIRED_OUTPUTS = ("guest.ply", "merged.ply")
 
@@ -303,7 +309,7 @@ def solve_case(spec: CaseSpec, *, step: _Step | None = None, progress: Any = Non
 
 
 def _write_outputs(
-    solved: SolvedCase, inputs: dict, tmp: Path, snapshots: bool, step: _Step
+    solved: SolvedCase, inputs: dict, tmp: Path, snapshots: bool, step: _Step, formats=None
 ) -> tuple[dict, dict]:
     """Save a solved case into the folder ``tmp``; return (report, timings)."""
     spec, result = solved.spec, solved.result
@@ -311,7 +317,8 @@ def _write_outputs(
     t = time.perf_counter()
     step.name = "save"
     warnings: list[str] = []
-    paths = result.save(tmp)  # a WeldError fails the case at step "save": merged.ply is required
+    # a WeldError fails the case at step "save": merged.ply is required
+    paths = result.save(tmp, formats=formats)
     report = json.loads(paths["report"].read_text(encoding="utf-8"))
     timings["solver"] = report.pop("timings", {})
     metrics = report.get("metrics", {})
@@ -422,6 +429,7 @@ def run_case(
     record_errors: bool = True,
     progress: Any = None,
     publish_guard: Any = None,
+    formats=None,
 ) -> dict:
     """Run one case and write its output folder (see ``docs/pipelines.md``).
 
@@ -452,6 +460,9 @@ def run_case(
         Called just before the outputs are moved into ``out``; if it raises,
         nothing is published (a batch worker checks that its batch still
         holds the output folder's lock).
+    formats : str or iterable of str, optional
+        Mesh formats of the outputs (default ``("ply", "vtu")``; see
+        :meth:`igljoin.JoinResult.save`).
 
     Returns
     -------
@@ -484,7 +495,7 @@ def run_case(
             step.name = "read"
             inputs = spec.input_hashes()
             solved = solve_case(spec, step=step, progress=progress)
-            _, timings = _write_outputs(solved, inputs, tmp, snapshots, step)
+            _, timings = _write_outputs(solved, inputs, tmp, snapshots, step, formats)
             timings["total"] = time.perf_counter() - start
             atomic_write_text(tmp / TIMINGS, _json_text(timings))
         except Exception as exc:  # any failure of the case is recorded, not raised
@@ -856,6 +867,7 @@ def _case_task(payload: dict) -> dict:
         payload["out"],
         snapshots=payload["snapshots"],
         publish_guard=_lock_guard(payload.get("lock"), payload.get("token")),
+        formats=payload.get("formats"),
     )
 
 
@@ -1019,6 +1031,7 @@ def run_batch(
     resume: bool = False,
     progress: bool = True,
     snapshots: bool = False,
+    formats=None,
 ) -> BatchSummary:
     """Run every case folder under ``cases_dir`` and write outputs and a summary.
 
@@ -1051,6 +1064,9 @@ def run_batch(
         Show a progress bar (tqdm, on stderr; only when stderr is a terminal).
     snapshots : bool, optional
         Also render ``snapshot.png`` per case with :func:`igljoin.viz.render`.
+    formats : str or iterable of str, optional
+        Mesh formats of each case's outputs (default ``("ply", "vtu")``; see
+        :meth:`igljoin.JoinResult.save`).
 
     Returns
     -------
@@ -1080,6 +1096,7 @@ def run_batch(
     'all 10 cases ok'
     """
     start = time.perf_counter()
+    formats = None if formats is None else output_formats(formats)
     cases = discover_cases(cases_dir)
     names = [c.name for c in cases]
     dupes = sorted({n for n in names if names.count(n) > 1})
@@ -1105,7 +1122,7 @@ def run_batch(
         guard = {"lock": str(lock_path), "token": token}
         try:
             if todo:
-                run = _Run(out, snapshots, guard, rows, summary, bar, len(todo))
+                run = _Run(out, snapshots, guard, rows, summary, bar, len(todo), formats)
                 if local_pool:
                     run.local(todo, workers)
                 else:
@@ -1133,8 +1150,9 @@ def run_batch(
 class _Run:
     """The cases of one batch on executors: results, retries, rows, progress."""
 
-    def __init__(self, out, snapshots, guard, rows, summary, bar, total):
+    def __init__(self, out, snapshots, guard, rows, summary, bar, total, formats=None):
         self.out, self.snapshots, self.guard = out, snapshots, guard
+        self.formats = formats
         self.rows, self.summary, self.bar, self.total = rows, summary, bar, total
         self.failed = 0
 
@@ -1171,6 +1189,7 @@ class _Run:
                     "case": str(case),
                     "out": str(self.out / case.name),
                     "snapshots": bool(self.snapshots),
+                    "formats": self.formats,
                     **self.guard,
                 }
                 futures[ex.submit(_case_task, payload)] = case

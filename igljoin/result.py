@@ -13,7 +13,7 @@ import numpy as np
 from .atomic import atomic_write_text
 from .correspond import Correspondence
 from .errors import WeldError
-from .io import write_mesh
+from .io import DEFAULT_OUTPUT_FORMATS, output_formats, write_mesh
 from .mesh import Mesh
 from .metrics import SELF_INTERSECTION_RINGS, ring_band, self_intersections
 from .options import JoinOptions
@@ -295,7 +295,9 @@ class JoinResult:
             }
         )
 
-    def save(self, folder: str | os.PathLike, *, merged: bool = True) -> dict[str, Path]:
+    def save(
+        self, folder: str | os.PathLike, *, merged: bool = True, formats=None
+    ) -> dict[str, Path]:
         """Write the deformed guest, the welded mesh and the report into ``folder``.
 
         Parameters
@@ -307,12 +309,19 @@ class JoinResult:
         merged : bool
             Also write ``merged.ply``. Pass ``False`` to save a join whose
             weld fails (:class:`~igljoin.errors.WeldError`).
+        formats : str or iterable of str, optional
+            Mesh formats to write, e.g. ``("ply", "vtu")`` (the default,
+            :data:`igljoin.io.DEFAULT_OUTPUT_FORMATS`), ``"ply,vtk"`` or
+            ``["vtu"]``; any suffix :func:`~igljoin.io.write_mesh` writes.
 
         Returns
         -------
         dict of str to pathlib.Path
             ``{"guest": .../guest.ply, "merged": .../merged.ply,
-            "report": .../report.json}`` (no ``"merged"`` if not written).
+            "guest_vtu": .../guest.vtu, "merged_vtu": .../merged.vtu,
+            "report": .../report.json}`` (no ``"merged*"`` if not written):
+            ``"guest"``/``"merged"`` name the file of the first format,
+            ``"guest_<fmt>"``/``"merged_<fmt>"`` those of the others.
 
         Notes
         -----
@@ -326,12 +335,16 @@ class JoinResult:
           vertex ``displacement`` and the face ``area_ratio``: MeshLab reads
           only that property name (Filters > Color Creation > Colorize by
           vertex / face quality).
+        * ``guest.vtu`` / ``merged.vtu``: the same meshes with every property
+          as a named VTK array, which ParaView and VTK colour by (ParaView's
+          PLY reader keeps no custom properties).
 
-        Binary little-endian PLY with float64 values: :func:`igljoin.read_mesh`
-        returns every property as an attribute (exactly); MeshLab and
-        pymeshlab load the geometry and the ``quality`` values, ParaView the
-        geometry (see ``docs/results.md``).
+        PLY with float64 values, ASCII because the meshes have face
+        properties (see :func:`~igljoin.io.write_mesh`): :func:`igljoin.read_mesh`
+        and meshio return every property (exactly); MeshLab and pymeshlab
+        load the geometry and the ``quality`` values (see ``docs/results.md``).
         """
+        kinds = output_formats(DEFAULT_OUTPUT_FORMATS if formats is None else formats)
         out = Path(folder)
         if out.exists() and not out.is_dir():
             raise NotADirectoryError(
@@ -346,9 +359,14 @@ class JoinResult:
                     f"{exc} (to save the rest, call save(folder, merged=False))"
                 ) from None
         out.mkdir(parents=True, exist_ok=True)
-        paths = {"guest": write_mesh(out / "guest.ply", _with_quality(self.guest))}
-        if welded is not None:
-            paths["merged"] = write_mesh(out / "merged.ply", _with_quality(welded.mesh))
+        paths = {}
+        meshes = [("guest", self.guest)] + ([("merged", welded.mesh)] if welded else [])
+        for kind, mesh in meshes:
+            for i, fmt in enumerate(kinds):
+                shown = _with_quality(mesh) if fmt == "ply" else mesh
+                paths[kind if i == 0 else f"{kind}_{fmt}"] = write_mesh(
+                    out / f"{kind}.{fmt}", shown
+                )
         text = json.dumps(self.report(), indent=2, allow_nan=False) + "\n"
         paths["report"] = atomic_write_text(out / "report.json", text)
         return paths

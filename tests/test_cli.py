@@ -150,7 +150,9 @@ def test_join_files(patch_files, tmp_path):
     assert sorted(p.name for p in out.iterdir()) == [
         ".igljoin-manifest.json",  # the list of igljoin's own files (docs/pipelines.md)
         "guest.ply",
+        "guest.vtu",
         "merged.ply",
+        "merged.vtu",
         "report.json",
         "timings.json",
     ]

@@ -184,7 +184,15 @@ def test_good_cases_outputs_are_complete(local_run, cases):
             assert set(error) == {"case", "igljoin_version", "type", "message", "step", "inputs"}
             continue
         names = sorted(p.name for p in folder.iterdir())
-        assert names == [MANIFEST, "guest.ply", "merged.ply", "report.json", "timings.json"]
+        assert names == [
+            MANIFEST,
+            "guest.ply",
+            "guest.vtu",
+            "merged.ply",
+            "merged.vtu",
+            "report.json",
+            "timings.json",
+        ]
         report = json.loads((folder / "report.json").read_text())
         assert report["case"] == case.name and report["igljoin_version"] == igljoin.__version__
         for role, entry in report["inputs"].items():

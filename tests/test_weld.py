@@ -282,7 +282,7 @@ def test_seam_off_the_host_curve_is_reported_not_raised(small, tmp_path):
         moved.save(tmp_path / "out")
     assert not (tmp_path / "out").exists()  # nothing written when the weld fails
     paths = moved.save(tmp_path / "out", merged=False)
-    assert set(paths) == {"guest", "report"}
+    assert set(paths) == {"guest", "guest_vtu", "report"}
 
 
 def test_duplicated_seam_face_is_non_manifold(small):
@@ -341,11 +341,17 @@ def test_save_round_trip(cases, tmp_path):
     res = cases["end_to_end/shorter"].res
     folder = tmp_path / "new" / "case"  # created with its parents
     paths = res.save(folder)
-    assert set(paths) == {"guest", "merged", "report"}
-    assert sorted(p.name for p in folder.iterdir()) == ["guest.ply", "merged.ply", "report.json"]
+    assert set(paths) == {"guest", "merged", "guest_vtu", "merged_vtu", "report"}
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "guest.ply",
+        "guest.vtu",
+        "merged.ply",
+        "merged.vtu",
+        "report.json",
+    ]
     for key, mesh in (("guest", res.guest), ("merged", res.merged.mesh)):
         back = igljoin.read_mesh(paths[key])
-        # binary PLY stores float64 and int32: exact round trip
+        # PLY stores float64 (%.17g in ASCII) and int32: exact round trip
         np.testing.assert_array_equal(back.V, mesh.V)
         np.testing.assert_array_equal(back.F, mesh.F)
         # every attribute comes back (as float64), plus MeshLab's quality copies
@@ -382,7 +388,7 @@ def test_save_round_trip(cases, tmp_path):
     # saving again replaces the files (atomically; no temporary file is left behind)
     again = res.save(folder)
     assert again == paths
-    assert len(list(folder.iterdir())) == 3
+    assert len(list(folder.iterdir())) == 5
 
 
 def test_save_into_a_file_is_refused(cases, tmp_path):
