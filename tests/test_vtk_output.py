@@ -243,6 +243,7 @@ def test_cli_formats_flag(tmp_path, capsys):
     assert code == 0, capsys.readouterr().err
     names = sorted(p.name for p in out.iterdir())
     assert names == [
+        ".igljoin-manifest.json",  # the record of what igljoin wrote there
         "guest.ply",
         "guest.vtk",
         "merged.ply",
@@ -272,6 +273,7 @@ def test_batch_formats_reach_every_case(tmp_path):
     assert summary.ok, summary.message()
     names = sorted(p.name for p in (tmp_path / "out" / "one").iterdir())
     assert names == [
+        ".igljoin-manifest.json",  # the record of what igljoin wrote there
         "guest.ply",
         "guest.vtk",
         "merged.ply",
