@@ -22,7 +22,7 @@ from igljoin.pipeline import SolvedCase, _Step, _write_outputs, run_batch
 from .test_pipeline import assert_same_outputs, file_hashes, hidden
 
 IGLJOIN = Path(sys.executable).parent / "igljoin"
-SLOW = 4  # cases of ~1 s each (3,000 iterations, capped): a kill lands while workers are busy
+SLOW = 4  # cases of ~0.5 s each (1,500 iterations, capped): a kill lands while workers are busy
 
 
 def _write_case(root: Path, name: str, mesh_pair, toml: str) -> None:
@@ -43,7 +43,7 @@ def slow_cases(tmp_path_factory, patch) -> Path:
     root = tmp_path_factory.mktemp("slow")
     toml = "[host_curve]\nloop = 0\n[options]\ntolerance = 1e-300\nmax_iterations = {}\n"
     for k in range(SLOW):
-        _write_case(root, f"case{k}", patch, toml.format(3000 + k))  # each case its own result
+        _write_case(root, f"case{k}", patch, toml.format(1500 + k))  # each case its own result
     return root
 
 
@@ -268,3 +268,36 @@ def test_a_worker_without_its_batch_lock_publishes_nothing(fast_cases, tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == [".igljoin-batch.lock"]  # nothing
     own = _lock_guard(str(lock), "token-of-the-batch-that-now-owns-the-folder")
     assert run_case(fast_cases / "a", tmp_path / "a", publish_guard=own)["status"] == "ok"
+
+
+def test_a_case_whose_worker_always_dies_fails_alone_with_the_reason(slow_cases, tmp_path):
+    """A case that kills its worker each time (as an out-of-memory case does) fails, named."""
+    cases = tmp_path / "cases"
+    shutil.copytree(slow_cases / "case0", cases / "doomed")
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.3)
+    for name in ("a", "b"):
+        _write_case(cases, name, (s.host, s.guest), "[host_curve]\nloop = 0\n")
+    out = tmp_path / "out"
+    stop = threading.Event()
+
+    def killer() -> None:  # whenever "doomed" runs, its worker dies
+        while not stop.is_set():
+            if out.is_dir() and any(p.name.startswith(".doomed.tmp-") for p in out.iterdir()):
+                for pid, cmd in _children(os.getpid()):
+                    if "spawn_main" in cmd:
+                        os.kill(pid, signal.SIGKILL)
+            time.sleep(0.005)
+
+    thread = threading.Thread(target=killer, daemon=True)
+    thread.start()
+    try:
+        summary = run_batch(cases, out, workers=2, progress=False)
+    finally:
+        stop.set()
+        thread.join(timeout=10)
+    rows = {r["name"]: r for r in summary.rows}
+    assert rows["a"]["status"] == "ok" and rows["b"]["status"] == "ok"
+    assert rows["doomed"]["status"] == "failed" and rows["doomed"]["step"] == "worker"
+    assert "worker running this case died" in rows["doomed"]["error_message"]
+    assert json.loads((out / "doomed" / "error.json").read_text())["step"] == "worker"
+    assert not hidden(out)

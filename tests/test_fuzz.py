@@ -192,7 +192,7 @@ def test_random_joins_weld_cleanly(data):
 # igljoin's documented errors (or OSError for the file system), never hang or crash.
 
 #: Examples per hostile-input test in the ci profile (each writes files: ~5 ms each).
-HOSTILE_EXAMPLES = max(50, settings.default.max_examples // 4)
+HOSTILE_EXAMPLES = max(50, settings.default.max_examples // 7)
 
 _huge_ints = st.one_of(
     st.integers(-(10**400), 10**400), st.integers(2**31 - 2, 2**63 + 2), st.integers(-3, 3)

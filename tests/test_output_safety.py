@@ -123,7 +123,7 @@ def test_batch_keeps_user_files_and_look_alike_temporaries(case, tmp_path):
     (out / "a" / "mine.csv").write_text("1,2\n")
     before = tree(out)
     for flags in ([], ["--resume"]):
-        proc = cli("batch", cases, "-o", out, "--workers", "1", "--no-progress", *flags)
+        proc = cli("batch", cases, "-o", out, "--workers", "0", "--no-progress", *flags)
         assert proc.returncode == 0, proc.stderr
         after = tree(out)
         assert {k: after[k] for k in before} == before
