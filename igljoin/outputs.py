@@ -49,7 +49,7 @@ MANIFEST = ".igljoin-manifest.json"
 #: Empty file that marks a staging folder as igljoin's.
 STAGING_MARK = ".igljoin-staging"
 
-_STAGING_DIR = re.compile(r"^\..+\.tmp-[0-9a-f]{8}$")
+_STAGING_DIR = re.compile(r"^\..+\.(tmp|new)-[0-9a-f]{8}$")
 _MANIFEST_TMP = re.compile(r"^\.\.igljoin-manifest\.tmp-[0-9a-f]{8}\.json$")
 _MAX_MANIFEST_BYTES = 1 << 20
 
@@ -165,12 +165,26 @@ def make_staging(final: str | os.PathLike) -> Path:
     """
     final = Path(final)
     for _ in range(100):
-        tmp = final.with_name(f".{final.name}.tmp-{secrets.token_hex(4)}")
+        token = secrets.token_hex(4)
+        tmp = final.with_name(f".{final.name}.tmp-{token}")
+        # made under another name and renamed once marked, so that no folder of
+        # the staging name ever lacks the mark (a kill between the two steps
+        # leaves a marked ".new-" folder, which remove_stale_staging also removes)
+        new = final.with_name(f".{final.name}.new-{token}")
+        if os.path.lexists(tmp):
+            continue
         try:
-            tmp.mkdir()
+            new.mkdir()
         except FileExistsError:
             continue
-        (tmp / STAGING_MARK).touch()
+        (new / STAGING_MARK).touch()
+        try:
+            os.rename(new, tmp)
+        except OSError:
+            shutil.rmtree(new, ignore_errors=True)
+            if tmp.exists():
+                continue
+            raise
         return tmp
     raise FileExistsError(f"cannot create a temporary folder beside {final}")
 

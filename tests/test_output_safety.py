@@ -17,7 +17,7 @@ from igljoin.outputs import MANIFEST, read_manifest
 from igljoin.pipeline import run_case
 
 IGLJOIN = Path(sys.executable).parent / "igljoin"
-JOIN_FILES = ["guest.ply", "merged.ply", "report.json", "timings.json"]
+JOIN_FILES = ["guest.ply", "guest.vtu", "merged.ply", "merged.vtu", "report.json", "timings.json"]
 
 
 def cli(*args) -> subprocess.CompletedProcess:
