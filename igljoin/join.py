@@ -639,8 +639,41 @@ class JoinSolver:
             lo, hi = (mid, hi) if area(mid) < rest else (lo, mid)
         return X + 0.5 * (lo + hi) * lift
 
+    def warm_start(self, start: Any, targets: np.ndarray) -> np.ndarray:
+        """Positions ``start`` with their seam moved onto ``targets``, the move extended smoothly.
+
+        Parameters
+        ----------
+        start : ndarray, shape (n', 3), or JoinResult
+            Positions of the refined guest (``JoinResult.guest.V`` of an
+            earlier solve of this solver, or the result itself).
+        targets : ndarray, shape (s, 3)
+
+        Returns
+        -------
+        ndarray, shape (n', 3)
+        """
+        if isinstance(start, JoinResult):
+            start = start.guest.V
+        n = len(self.corr.V)
+        try:
+            X = np.array(start, dtype=np.float64)
+        except (TypeError, ValueError):
+            X = None
+        if X is None or X.shape != (n, 3) or not np.isfinite(X).all():
+            raise OptionsError(
+                f"start must be a finite array of shape ({n}, 3) (the refined guest's positions, "
+                "e.g. an earlier result's guest.V) or a JoinResult of this solver"
+            )
+        return X + self.solver.extend(targets - X[self.corr.seam])
+
     def solve(
-        self, targets: np.ndarray | None = None, *, progress: Any = None, **changes: Any
+        self,
+        targets: np.ndarray | None = None,
+        *,
+        progress: Any = None,
+        start: Any = None,
+        **changes: Any,
     ) -> JoinResult:
         """Deform the guest.
 
@@ -650,6 +683,13 @@ class JoinSolver:
             New positions for the seam vertices, in the order of
             ``JoinResult.seam`` (seam after seam; default: the host curve
             correspondence). Reuses the factorization.
+        start : ndarray, shape (n', 3), or JoinResult, optional
+            Start the iteration from these positions of the refined guest
+            (e.g. the previous result, for a re-solve after a small change
+            of the targets) instead of :meth:`initial_guess`; the seam is
+            moved onto the targets and the move extended smoothly
+            (:meth:`warm_start`). A start at the minimum stops after one or
+            two iterations.
         progress : callable, optional
             Called with a :class:`SolveProgress` after every iteration (for
             a progress display of long solves; it should return quickly).
@@ -672,7 +712,7 @@ class JoinSolver:
                 "seam vertex)"
             )
         t0 = time.perf_counter()
-        X0 = self.initial_guess(bc)
+        X0 = self.initial_guess(bc) if start is None else self.warm_start(start, bc)
         t1 = time.perf_counter()
 
         def report(iteration: int, energy: float) -> None:
