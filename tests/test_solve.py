@@ -379,3 +379,33 @@ def test_bad_start_is_rejected(patch):
     for bad in (np.zeros((n - 1, 3)), np.full((n, 3), np.nan), "guest"):
         with pytest.raises(igljoin.OptionsError, match="start must be"):
             solver.solve(start=bad)
+
+
+# -- reuse of the factorization across solves ----------------------------------------------
+
+
+def test_resolves_reuse_the_factorization(patch):
+    """New targets, iteration settings or a warm start never refactor; a weight change does."""
+    solver = _solver(patch, max_iterations=50)
+    first = solver.solve()
+    # the plain local/global step needs Q itself (P is scaled): made once, on first use
+    solver.solve(acceleration=0, max_iterations=3)
+    made = linsolve.FixedQuadratic.made
+    rng = np.random.default_rng(7)
+    # a seam target change of 1 % of the guest's size, the slider's kind of change
+    targets = first.seam_targets + 0.01 * _size(patch) * rng.normal(size=first.seam_targets.shape)
+    runs = [
+        solver.solve(targets),
+        solver.solve(targets, start=first),
+        solver.solve(tolerance=1e-9, max_iterations=400),
+        solver.solve(acceleration=3, time_limit=30.0),
+        solver.solve(acceleration=0, max_iterations=5),
+        solver.solve(initial_guess="rigid"),
+    ]
+    assert linsolve.FixedQuadratic.made == made
+    assert solver.factorizations == 1
+    assert all(r.iterations >= 1 for r in runs)
+    # the re-solve with new targets reaches them (hard constraints)
+    np.testing.assert_allclose(runs[0].guest.V[runs[0].seam], targets, atol=1e-9 * _size(patch))
+    solver.solve(stretch_weight=2.0)
+    assert linsolve.FixedQuadratic.made > made and solver.factorizations == 2
