@@ -279,6 +279,8 @@ def _host_neighbourhood(host: Mesh, host_curve: Any, seams: Any) -> Mesh | None:
     pad = max(0.5 * float(np.linalg.norm(hi - lo)), _NEAR_EDGES * longest)
     near = ((host.V >= lo - pad) & (host.V <= hi + pad)).all(axis=1)
     F = host.F[near[host.F].any(axis=1)]
+    if not len(F):
+        return None  # curves on no face: the whole-host path reports it
     return Mesh(host.V, F, name=host.name)
 
 
@@ -457,6 +459,13 @@ class JoinSolver:
     The factorization of the quadratic form is kept: :meth:`solve` with new
     seam targets or iteration settings reuses it; changing a weight or the
     smooth term rebuilds it (:attr:`factorizations` counts them).
+    ``solve(targets, start=previous_result)`` also starts from the previous
+    result, which after a small change of the targets needs fewer
+    iterations.
+
+    A host of more than ``HOST_CHECK_ALL_FACES`` (200,000) faces whose
+    curves are given by vertex indices is checked, selected and measured
+    near its curves only (docs/limits.md, *Large hosts*).
 
     Examples
     --------

@@ -227,6 +227,19 @@ def run_case(spec: dict) -> dict:
     }
     if spec.get("resolves"):
         out["resolve"] = _resolves(solver, res, int(spec["resolves"]))
+    if spec["kind"] == "host":
+        # the same join with the whole host checked and selected (the path of a small
+        # host, and of every host before the neighbourhood checks), back to back
+        module = sys.modules["igljoin.join"]
+        kept = module.HOST_CHECK_ALL_FACES
+        whole = []
+        try:
+            module.HOST_CHECK_ALL_FACES = 1 << 62
+            for _ in range(3):
+                whole.append(_timed_join(s)[0])
+        finally:
+            module.HOST_CHECK_ALL_FACES = kept
+        out["whole_host_join_seconds"] = statistics.median(whole)
     if out["arap_seconds"]:
         core = med["factor"] + med["iterate"]
         out["ratio_core"] = core / out["arap_seconds"]
@@ -643,11 +656,13 @@ def _host_table(cases: list[dict]) -> list[str]:
         "The paper's partial-patch guest on a 350° aortic wall 300 mm long with the same "
         "hole (`pipelines/benchmark.py`, `_BIG_HOST`). *first*: the first join in the "
         "process (nothing cached); *join*: median of the timed runs; *setup* includes "
-        "checking the host near its curve and selecting the curve.",
+        "checking the host near its curve and selecting the curve; *whole host checked*: "
+        "median of 3 joins in the same process with the whole host checked and its curve "
+        "selected among all its loops (the path of a small host).",
         "",
         "| case | host vertices | host faces | guest vertices | first join (ms) | join (ms) "
-        "| setup | iterate | metrics |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| setup | iterate | metrics | whole host checked (ms) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for c in rows:
         p = c["phases_raw"]
@@ -655,7 +670,7 @@ def _host_table(cases: list[dict]) -> list[str]:
             f"| {c['name']} | {c['host_vertices']:,} | {c['host_faces']:,} | "
             f"{c['counts']['points']:,} | {_ms(c.get('first_join_seconds'))} | "
             f"{_ms(c['join_seconds'])} | {_ms(c['phases']['setup'])} | {_ms(p['iterate'])} | "
-            f"{_ms(p['metrics'])} |"
+            f"{_ms(p['metrics'])} | {_ms(c.get('whole_host_join_seconds'))} |"
         )
     return lines
 
@@ -691,6 +706,13 @@ def _iteration_table(cases: list[dict]) -> list[str]:
     return lines
 
 
+def _kind_rank(case: dict) -> tuple:
+    """Position of a case in a full run: paper samples, the large host, guests by size."""
+    spec = case["spec"]
+    rank = {"paper": 0, "host": 1}.get(spec["kind"], 2)
+    return (rank, spec.get("vertices", 0))
+
+
 def _name(spec: dict) -> str:
     if spec["kind"] == "host":
         return "patch on large host"
@@ -714,6 +736,11 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", type=int, help="throughput cases (default 20, quick 8)")
     ap.add_argument("--sizes", help="large guests, comma-separated vertex counts")
     ap.add_argument("--out", help="output folder (default docs/, quick: benchmark-quick/)")
+    ap.add_argument(
+        "--only",
+        help="run only the cases of these kinds (comma-separated: paper, host, patch, tube) "
+        "and replace them in the existing benchmarks.json",
+    )
     ap.add_argument("--worker", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
@@ -757,6 +784,15 @@ def main(argv=None) -> int:
             }
         )
     results = {"machine": _machine(), "cases": []}
+    kept_cases = []
+    if args.only:
+        kinds = set(args.only.split(","))
+        specs = [sp for sp in specs if sp["kind"] in kinds]
+        n_cases = 0
+        previous = json.loads((out_dir / "benchmarks.json").read_text())
+        kept_cases = [c for c in previous["cases"] if c["spec"]["kind"] not in kinds]
+        results["throughput"] = previous.get("throughput")
+        results["machine"]["earlier_runs"] = previous["machine"]
     for spec in specs:
         name = _name(spec)
         print(f"{name} ...", end=" ", flush=True)
@@ -774,6 +810,16 @@ def main(argv=None) -> int:
         print("throughput ...", end=" ", flush=True)
         results["throughput"] = throughput(n_cases)
         print(f"{results['throughput']['scaling']:.2f}x", flush=True)
+    if args.only:
+        new_cases = results["cases"]
+        results["cases"] = kept_cases
+        for c in new_cases:
+            # back where the full run puts it: before the first case of a later kind
+            at = next(
+                (i for i, k in enumerate(results["cases"]) if _kind_rank(k) > _kind_rank(c)),
+                len(results["cases"]),
+            )
+            results["cases"].insert(at, c)
     results["machine"]["load_average_end"] = os.getloadavg()
     out_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out_dir / "benchmarks.json", json.dumps(results, indent=1))
