@@ -13,6 +13,7 @@ the fixed vertices of one factorization.
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -23,7 +24,7 @@ import numpy as np
 from . import metrics
 from .boundary import Curve, SelectedCurve, boundary_loops, select_curve
 from .correspond import Correspondence, correspond, pair_seams, rigid_fit
-from .errors import CurveError, OptionsError
+from .errors import CurveError, MeshError, OptionsError
 from .frames import SeamFrames, face_normals_areas, seam_frames, unit
 from .mesh import Mesh, as_mesh
 from .options import JoinOptions
@@ -209,6 +210,113 @@ def _combined_gap(gaps: list[dict], counts: list[int]) -> dict:
     }
 
 
+#: A host with more faces than this is checked near its curves only (see _check_host).
+HOST_CHECK_ALL_FACES = 200_000
+
+# the host neighbourhood reaches at least this many of the longest curve edges beyond the
+# curves (the bands the join measures are a few edges wide)
+_NEAR_EDGES = 10
+
+
+def _given_indices(spec: Any) -> np.ndarray | None:
+    """The vertex indices of a curve given as an index array (or ``Curve(indices=...)``)."""
+    if isinstance(spec, Curve):
+        spec = spec.indices
+    elif isinstance(spec, Mapping):
+        spec = spec.get("indices")
+    elif spec is None or isinstance(spec, (int, np.integer, str, bytes)):
+        return None
+    try:
+        idx = np.asarray(spec)
+    except (TypeError, ValueError):
+        return None
+    if idx.ndim != 1 or idx.size == 0 or not np.issubdtype(idx.dtype, np.integer):
+        return None
+    return idx.astype(np.int64)
+
+
+def _renamed(mesh: Mesh, name: str) -> Mesh:
+    """``Mesh(mesh.V, mesh.F, name=name)`` without copying the (read-only) arrays."""
+    out = copy.copy(mesh)
+    object.__setattr__(out, "name", name)
+    object.__setattr__(out, "vertex_attributes", {})
+    object.__setattr__(out, "face_attributes", {})
+    return out
+
+
+def _host_neighbourhood(host: Mesh, host_curve: Any, seams: Any) -> Mesh | None:
+    """The part of a large single host that the join uses, or ``None`` to use all of it.
+
+    The host is rigid: the join reads it only around its curves (their
+    frames, the crease and dihedral bands, the weld's seam faces and the
+    self-intersection band). For a host of more than
+    :data:`HOST_CHECK_ALL_FACES` faces whose curves are all given by vertex
+    indices this is the mesh of the faces that have a vertex within half a
+    curve diameter (at least :data:`_NEAR_EDGES` curve edges) of the curves'
+    bounding box — a physical neighbourhood that contains every band the
+    join measures (a few edges wide); every vertex inside it keeps all its
+    faces — on the host's own vertex ids. Smaller hosts, and
+    curves selected by loop or start vertex (which need all of the host's
+    boundary), get ``None``.
+    """
+    specs = [host_curve] if seams is None else [
+        item[-2] if isinstance(item, (tuple, list)) and len(item) in (2, 3) else None
+        for item in (seams if isinstance(seams, Sequence) else [])
+    ]
+    curves = [_given_indices(spec) for spec in specs]
+    n = host.n_vertices
+    if (
+        host.n_faces <= HOST_CHECK_ALL_FACES
+        or not curves
+        or any(c is None or c.min() < 0 or c.max() >= n for c in curves)
+        or (seams is not None and any(len(item) == 3 for item in seams))
+    ):
+        return None
+    P = host.V[np.concatenate(curves)]
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    longest = max(float(np.linalg.norm(np.diff(host.V[c], axis=0), axis=1).max(initial=0.0))
+                  for c in curves)
+    pad = max(0.5 * float(np.linalg.norm(hi - lo)), _NEAR_EDGES * longest)
+    near = ((host.V >= lo - pad) & (host.V <= hi + pad)).all(axis=1)
+    F = host.F[near[host.F].any(axis=1)]
+    if not len(F):
+        return None  # curves on no face: the whole-host path reports it
+    return Mesh(host.V, F, name=host.name)
+
+
+def _check_host(host: Mesh, near: Mesh | None) -> None:
+    """``check_surface`` of a single host, on its neighbourhood ``near`` when given.
+
+    Where the neighbourhood fails a check the whole host is checked, so an
+    error always names the right elements and a fan cut at the
+    neighbourhood's rim is never reported. Defects farther away do not
+    enter the join and stay in the host as given.
+    """
+    if near is None:
+        check_surface(host, "host")
+        return
+    try:
+        check_surface(near, "host")
+    except MeshError:
+        check_surface(host, "host")
+
+
+def _select_near(host: Mesh, near: Mesh, spec: Any, name: str) -> SelectedCurve:
+    """A host curve given by indices, selected on the host's neighbourhood ``near``.
+
+    Every curve vertex lies inside the neighbourhood with all its faces, so
+    its boundary edges, their loop order and direction, and whether the
+    curve is a whole loop are the host's; only the loop's number is not
+    (``loop=-1``: the host's loops were not all traced). Where the
+    selection fails, it is repeated on the whole host for the error message.
+    """
+    try:
+        hc = select_curve(near, spec, name=name)
+    except CurveError:
+        return select_curve(host, spec, name=name)
+    return SelectedCurve(hc.indices, hc.closed, -1, hc.forward)
+
+
 def _guest_mesh(guest: Any) -> Mesh:
     """The guest as a :class:`Mesh` named "guest" (attributes kept)."""
     mesh = as_mesh(guest, "guest")
@@ -351,6 +459,13 @@ class JoinSolver:
     The factorization of the quadratic form is kept: :meth:`solve` with new
     seam targets or iteration settings reuses it; changing a weight or the
     smooth term rebuilds it (:attr:`factorizations` counts them).
+    ``solve(targets, start=previous_result)`` also starts from the previous
+    result, which after a small change of the targets needs fewer
+    iterations.
+
+    A host of more than ``HOST_CHECK_ALL_FACES`` (200,000) faces whose
+    curves are given by vertex indices is checked, selected and measured
+    near its curves only (docs/limits.md, *Large hosts*).
 
     Examples
     --------
@@ -384,7 +499,7 @@ class JoinSolver:
         if hosts is None:
             self.host = as_mesh(host, "host")
             if self.host.name == "mesh":
-                self.host = Mesh(self.host.V, self.host.F, name="host")
+                self.host = _renamed(self.host, "host")
             self.hosts = [self.host]
             self.host_offsets = np.array([0, self.host.n_vertices], dtype=np.int64)
         else:
@@ -395,8 +510,11 @@ class JoinSolver:
             ]
             self.host, self.host_offsets = _combined_host(self.hosts)
         self.guest = _guest_mesh(guest) if guest_mesh is None else guest_mesh
+        self._host_near = None if hosts is not None else _host_neighbourhood(
+            self.host, host_curve, seams
+        )
         if hosts is None:
-            check_surface(self.host, "host")
+            _check_host(self.host, self._host_near)
         else:
             for h in self.hosts:
                 check_surface(h, h.name)
@@ -440,7 +558,10 @@ class JoinSolver:
         self, index: int | None, hspec: Any, gspec: Any, hname: str, gname: str
     ) -> SeamPair:
         """Resolve the curves of one seam (not yet paired; ``pairing`` holds ``start_given``)."""
-        if index is None:
+        if index is None and self._host_near is not None:
+            hc = _select_near(self.host, self._host_near, hspec, hname)
+            index = 0
+        elif index is None:
             hc = select_curve(self.host, hspec, name=hname)
             index = int(np.searchsorted(self.host_offsets, hc.indices[0], side="right") - 1)
         else:
@@ -640,8 +761,41 @@ class JoinSolver:
             lo, hi = (mid, hi) if area(mid) < rest else (lo, mid)
         return X + 0.5 * (lo + hi) * lift
 
+    def warm_start(self, start: Any, targets: np.ndarray) -> np.ndarray:
+        """Positions ``start`` with their seam moved onto ``targets``, the move extended smoothly.
+
+        Parameters
+        ----------
+        start : ndarray, shape (n', 3), or JoinResult
+            Positions of the refined guest (``JoinResult.guest.V`` of an
+            earlier solve of this solver, or the result itself).
+        targets : ndarray, shape (s, 3)
+
+        Returns
+        -------
+        ndarray, shape (n', 3)
+        """
+        if isinstance(start, JoinResult):
+            start = start.guest.V
+        n = len(self.corr.V)
+        try:
+            X = np.array(start, dtype=np.float64)
+        except (TypeError, ValueError):
+            X = None
+        if X is None or X.shape != (n, 3) or not np.isfinite(X).all():
+            raise OptionsError(
+                f"start must be a finite array of shape ({n}, 3) (the refined guest's positions, "
+                "e.g. an earlier result's guest.V) or a JoinResult of this solver"
+            )
+        return X + self.solver.extend(targets - X[self.corr.seam])
+
     def solve(
-        self, targets: np.ndarray | None = None, *, progress: Any = None, **changes: Any
+        self,
+        targets: np.ndarray | None = None,
+        *,
+        progress: Any = None,
+        start: Any = None,
+        **changes: Any,
     ) -> JoinResult:
         """Deform the guest.
 
@@ -651,6 +805,13 @@ class JoinSolver:
             New positions for the seam vertices, in the order of
             ``JoinResult.seam`` (seam after seam; default: the host curve
             correspondence). Reuses the factorization.
+        start : ndarray, shape (n', 3), or JoinResult, optional
+            Start the iteration from these positions of the refined guest
+            (e.g. the previous result, for a re-solve after a small change
+            of the targets) instead of :meth:`initial_guess`; the seam is
+            moved onto the targets and the move extended smoothly
+            (:meth:`warm_start`). A start at the minimum stops after one or
+            two iterations.
         progress : callable, optional
             Called with a :class:`SolveProgress` after every iteration (for
             a progress display of long solves; it should return quickly).
@@ -673,7 +834,7 @@ class JoinSolver:
                 "seam vertex)"
             )
         t0 = time.perf_counter()
-        X0 = self.initial_guess(bc)
+        X0 = self.initial_guess(bc) if start is None else self.warm_start(start, bc)
         t1 = time.perf_counter()
 
         def report(iteration: int, energy: float) -> None:
@@ -721,7 +882,7 @@ class JoinSolver:
     def _result(self, run, bc) -> JoinResult:
         c = self.corr
         X = run.X
-        host = self.host
+        host = self.host if self._host_near is None else self._host_near  # same vertex ids
         ratio = metrics.area_ratio(c.V, X, c.F)
         strain = metrics.edge_strain(c.V, X, self.E)
         vertex_strain = metrics.vertex_strain(self.E, strain, len(X))

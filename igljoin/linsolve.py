@@ -84,6 +84,10 @@ class FixedQuadratic:
     free : ndarray of int64, shape (n - b,)
     Qff, Qfb : scipy.sparse.csr_matrix
         Free–free and free–fixed blocks of ``Q``.
+    made : int
+        Class attribute: factorizations made in this process (every
+        backend), so that code and tests can check that a re-solve reused
+        one instead of refactoring.
 
     Examples
     --------
@@ -93,6 +97,8 @@ class FixedQuadratic:
     >>> f.solve(np.zeros((3, 1)), np.array([[0.0], [2.0]])).ravel().tolist()
     [0.0, 1.0, 2.0]
     """
+
+    made = 0
 
     def __init__(self, Q: sp.spmatrix, fixed: np.ndarray, backend: str = "auto"):
         self.backend = resolve_backend(backend)
@@ -108,6 +114,7 @@ class FixedQuadratic:
         self.Qfb = sp.csr_matrix(rows[:, self.fixed])
         if not self.free.size:
             return
+        FixedQuadratic.made += 1
         if self.backend == "igl":
             self._data = igl.min_quad_with_fixed_data()
             ok = igl.min_quad_with_fixed_precompute(

@@ -84,9 +84,10 @@ class JoinOptions:
     tolerance : float
         Converged when the energy fell by less than ``tolerance`` times its
         value over the last five iterations and the last iteration moved no
-        vertex by more than ``sqrt(tolerance)`` mean edge lengths. The
-        default 1e-7 leaves the energy within about 1e-6 (relative) of the
-        minimum the iteration converges to.
+        vertex by more than ``sqrt(tolerance)`` mean edge lengths (or the
+        energy is below ``tolerance²`` of its scale, a minimum of zero
+        energy). The default 1e-7 leaves the energy within about 1e-6
+        (relative) of the minimum the iteration converges to.
     time_limit : float, optional
         Seconds after which the solve returns its current, non-converged result.
     snap_tolerance : float

@@ -202,6 +202,38 @@ class LocalGlobalSolver:
         out = self.factor.solve(np.ones((self.n, 1)), np.zeros((len(self.fixed), 1)))
         return out[:, 0]
 
+    def energy_floor(self, X: np.ndarray, tolerance: float) -> float:
+        """Energy below which ``X``'s neighbourhood counts as a zero-energy minimum.
+
+        ``E_ref = Σ_terms Σ_r w_r ‖(K (X − x̄))_r‖² = tr(X̄ᵀ Q X̄)`` is the
+        energy the terms would have if every quantity they measure (edge
+        vectors, Laplacian vectors, cross-seam directions) were missing —
+        the squared size of what the energy compares, independent of where
+        the guest lies and of its units. The floor ``tolerance² × E_ref``
+        is the energy whose residuals are, in the root mean square, a
+        fraction ``tolerance`` of those quantities: at or below it the
+        relative test has nothing left to resolve (an energy of rounding
+        noise, about 1e-30 of ``E_ref`` for a guest at its rest shape,
+        changes by its own size from one iteration to the next), and what
+        it could still gain is below ``tolerance²`` of the energy scale.
+        A real deformation (strains of 1e-4 and more) has energies many
+        orders above it, so the floor never stops a join that is still
+        moving.
+
+        Parameters
+        ----------
+        X : ndarray, shape (n, 3)
+            Positions of the scale (e.g. the initial guess).
+        tolerance : float
+
+        Returns
+        -------
+        float
+        """
+        Xc = np.asarray(X, dtype=np.float64) - np.mean(X, axis=0)
+        e_ref = float(np.einsum("ij,ij->", Xc, self.Q @ Xc))
+        return tolerance * tolerance * max(e_ref, 0.0)
+
     # -- the iteration ------------------------------------------------------------------
 
     def run(
@@ -235,9 +267,12 @@ class LocalGlobalSolver:
             Positions of the fixed vertices.
         max_iterations : int
         tolerance : float
-            Converged when the energy fell by less than ``tolerance`` times
-            its value over the last five iterations and the last iteration
-            moved no vertex by more than ``sqrt(tolerance) × scale``.
+            Converged when the last iteration moved no vertex by more than
+            ``sqrt(tolerance) × scale`` and either the energy fell by less
+            than ``tolerance`` times its value over the last five iterations
+            or the energy is at its floor, ``tolerance² × E_ref`` (see
+            :meth:`energy_floor`): a guest already at a minimum of zero
+            energy (joined back where it was cut from) stops at once.
         time_limit : float, optional
             Wall-clock seconds after which the current iterate is returned
             (``converged=False``, ``reason="time_limit"``).
@@ -292,6 +327,7 @@ class LocalGlobalSolver:
         energy = [e]
         memory = _Memory(acceleration, g.shape)
         step_tol = np.sqrt(tolerance) * scale
+        floor = self.energy_floor(X, tolerance)
         for it in range(1, max_iterations + 1):
             hint = state.rotations
             if acceleration > 0 and memory.size:
@@ -336,7 +372,8 @@ class LocalGlobalSolver:
             if callback is not None:
                 callback(it, e)
             window = energy[max(0, len(energy) - 1 - _WINDOW)] - e
-            if it >= 2 and abs(window) <= tolerance * max(e, 1e-300) and move <= step_tol:
+            settled = (it >= 2 and abs(window) <= tolerance * max(e, 1e-300)) or e <= floor
+            if settled and move <= step_tol:
                 result.converged, result.reason = True, "tolerance"
                 break
             if time_limit is not None and time.perf_counter() - start > time_limit:

@@ -505,10 +505,12 @@ def check_welded(welded: Welded, *, full: bool = False) -> None:
     ----------
     welded : Welded
     full : bool
-        Run the two manifold checks on the whole mesh. By default they run on
-        the faces at the seam only: welding changes nothing else, and host
-        and guest were checked when the join started (``check_surface``).
-        Orientation and areas are always checked everywhere.
+        Run every check on the whole mesh. By default the manifold and
+        orientation checks run on the faces at the seam only (every edge
+        welding creates or shares has a seam vertex, so all its faces are
+        there; host and guest were checked when the join started,
+        ``check_surface``), and the area check on those and on every guest
+        face (the deformation moves them all).
 
     Raises
     ------
@@ -518,7 +520,8 @@ def check_welded(welded: Welded, *, full: bool = False) -> None:
     """
     V, F = welded.mesh.V, welded.mesh.F
     n = len(V)
-    sub = F if full else F[metrics.ring_band(F, welded.seam, 1)]
+    at_seam = None if full else metrics.ring_band(F, welded.seam, 1)
+    sub = F if full else F[at_seam]
     # both manifold checks are combinatorial: run them on the sub-mesh's own vertex ids
     # (ascending, as np.unique numbers them), first by _fans (cheap), then, where it finds
     # a problem or cannot run, by libigl for the message
@@ -559,7 +562,7 @@ def check_welded(welded: Welded, *, full: bool = False) -> None:
             "host and guest touch there other than along the seam — check that the curves "
             "are the joined boundaries and that the guest curve is a whole loop or path"
         )
-    key = _directed_keys(F, n)
+    key = _directed_keys(sub, n)
     dup = np.unique(key[1:][key[1:] == key[:-1]])
     if dup.size:
         raise WeldError(
@@ -568,12 +571,13 @@ def check_welded(welded: Welded, *, full: bool = False) -> None:
             "not consistently oriented — orient the host and guest consistently "
             "(igl.bfs_orient) before joining"
         )
-    area = igl.doublearea(V, F)
+    checked = F if full else F[at_seam | (welded.label == GUEST)]
+    area = igl.doublearea(V, checked)
     floor = AREA_FLOOR * max(float(area.mean()), 1e-300)
     flat = np.flatnonzero(~(area > floor))
     if flat.size:
         raise WeldError(
-            f"weld: {flat.size} faces have zero area {_offenders(welded, F[flat])}; a guest "
+            f"weld: {flat.size} faces have zero area {_offenders(welded, checked[flat])}; a guest "
             "seam vertex coincides with a host vertex it was not matched to — raise "
             "snap_tolerance or refine the guest near the seam"
         )

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures as cf
+import dataclasses
 import json
 import multiprocessing as mp
 import os
@@ -68,7 +69,29 @@ _BLAS_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLI
 # -- one case (runs inside a worker subprocess) ------------------------------------------------
 
 
+#: The large host: a 350-degree aortic wall 300 mm long (a thoracic aorta's length) with
+#: the paper's patch hole, meshed to about 460k vertices (target edge 0.33 mm).
+_BIG_HOST = {"radius": 15.0, "height": 300.0, "arc_deg": 350.0, "target_edge": 0.33}
+
+
 def _sample(spec: dict):
+    if spec["kind"] == "host":
+        # the paper's partial patch guest on a large host with the same hole (its vertices
+        # 0..n_hole-1, as on the paper's host)
+        s = phantoms.paper_sample("partial_patch", "equal")
+        h = _BIG_HOST
+        host = phantoms.aortic_wall(
+            h["radius"],
+            h["height"],
+            h["arc_deg"],
+            hole_axes=(8.0, 5.0),
+            n_hole=len(s.host_curve),
+            target_edge=h["target_edge"],
+            name="large host",
+        )
+        curve = np.arange(len(s.host_curve), dtype=np.int64)
+        assert np.array_equal(host.V[curve], s.host.V[s.host_curve])
+        return dataclasses.replace(s, name="large host", host=host, host_curve=curve)
     if spec["kind"] == "paper":
         return phantoms.paper_sample(spec["scenario"], spec["length"])
     if spec["kind"] == "tube":
@@ -102,14 +125,57 @@ def _arap_seconds(solver, iterations: int) -> float:
     return time.perf_counter() - t0
 
 
+def _slider_targets(targets: np.ndarray, step: int) -> np.ndarray:
+    """Seam targets turned by ``step`` degrees about an axis through their centroid (a slider)."""
+    from scipy.spatial.transform import Rotation
+
+    c = targets.mean(axis=0)
+    R = Rotation.from_rotvec(np.radians(float(step)) * np.array([1.0, 0.0, 0.0])).as_matrix()
+    return (targets - c) @ R.T + c
+
+
+def _resolves(solver, first, steps: int) -> dict:
+    """Re-solves through one ``JoinSolver`` with new seam targets (1° slider steps).
+
+    *cold*: ``solve(targets)`` from the initial guess; *warm*: ``solve(targets,
+    start=previous)``. Both reuse the factorization (counted).
+    """
+    from igljoin.linsolve import FixedQuadratic
+
+    made = FixedQuadratic.made
+    cold, warm, it_cold, it_warm, gaps = [], [], [], [], []
+    prev = first
+    for k in range(1, steps + 1):
+        T = _slider_targets(first.seam_targets, k)
+        t0 = time.perf_counter()
+        a = solver.solve(T)
+        cold.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        b = solver.solve(T, start=prev)
+        warm.append(time.perf_counter() - t0)
+        prev = b
+        it_cold.append(int(a.iterations))
+        it_warm.append(int(b.iterations))
+        gaps.append((b.energy[-1] - a.energy[-1]) / abs(a.energy[-1]))
+    return {
+        "cold_seconds": statistics.median(cold),
+        "warm_seconds": statistics.median(warm),
+        "cold_iterations": it_cold,
+        "warm_iterations": it_warm,
+        "max_warm_cold_gap": float(max(gaps)),
+        "factorizations": FixedQuadratic.made - made,
+    }
+
+
 def run_case(spec: dict) -> dict:
     """Time one case; returns plain JSON."""
     t0 = time.perf_counter()
     s = _sample(spec)
     build = time.perf_counter() - t0
     runs = int(spec["runs"])
+    first = None
     if spec.get("warmup", True):
-        _timed_join(s)
+        first = _timed_join(s)[0]
     walls, phases, arap = [], [], []
     solver = res = None
     options = {"time_limit": spec["time_limit"]} if spec.get("time_limit") else {}
@@ -134,6 +200,8 @@ def run_case(spec: dict) -> dict:
         "spec": spec,
         "build_seconds": build,
         "guest_vertices": int(s.guest.n_vertices),
+        "host_vertices": int(s.host.n_vertices),
+        "host_faces": int(s.host.n_faces),
         "counts": res.counts,
         "converged": bool(res.converged),
         "stop_reason": res.stop_reason,
@@ -155,7 +223,23 @@ def run_case(spec: dict) -> dict:
         },
         "phases_raw": med,
         "arap_seconds": statistics.median(arap) if arap else None,
+        "first_join_seconds": first,
     }
+    if spec.get("resolves"):
+        out["resolve"] = _resolves(solver, res, int(spec["resolves"]))
+    if spec["kind"] == "host":
+        # the same join with the whole host checked and selected (the path of a small
+        # host, and of every host before the neighbourhood checks), back to back
+        module = sys.modules["igljoin.join"]
+        kept = module.HOST_CHECK_ALL_FACES
+        whole = []
+        try:
+            module.HOST_CHECK_ALL_FACES = 1 << 62
+            for _ in range(3):
+                whole.append(_timed_join(s)[0])
+        finally:
+            module.HOST_CHECK_ALL_FACES = kept
+        out["whole_host_join_seconds"] = statistics.median(whole)
     if out["arap_seconds"]:
         core = med["factor"] + med["iterate"]
         out["ratio_core"] = core / out["arap_seconds"]
@@ -466,18 +550,26 @@ def markdown(results: dict) -> str:
             f"Median full join over the six paper samples: "
             f"**{_ms(statistics.median(c['join_seconds'] for c in paper))} ms**.",
         ]
+    lines += _resolve_table(cases)
+    lines += _host_table(cases)
+    lines += _iteration_table(cases)
     lines += _floor_table(cases)
     return "\n".join(lines) + "\n"
 
 
-#: Time targets of a full join, milliseconds, by case kind: (goal, stretch goal)
-TARGETS_MS = {"paper": (50.0, 20.0), 100_000: (3000.0, 2000.0), 1_000_000: (None, 30000.0)}
+#: Time targets, milliseconds, by case kind: (full join, re-solve through a JoinSolver)
+TARGETS_MS = {
+    "paper": (30.0, 10.0),
+    "host": (500.0, None),
+    100_000: (3000.0, None),
+    1_000_000: (60000.0, None),
+}
 
 
 def _target(case: dict):
     spec = case["spec"]
-    if spec["kind"] == "paper":
-        return TARGETS_MS["paper"]
+    if spec["kind"] in ("paper", "host"):
+        return TARGETS_MS[spec["kind"]]
     return TARGETS_MS.get(spec.get("vertices"))
 
 
@@ -499,22 +591,131 @@ def _floor_table(cases: list[dict]) -> list[str]:
         "iteration count, the part of the join that a faster local step cannot remove "
         "(docs/limits.md, *Speed*).",
         "",
-        "| case | iterations | goal (ms) | stretch goal (ms) | factor + back-solves (ms) "
-        "| local steps (ms) | join (ms) |",
-        "|---|---:|---:|---:|---:|---:|---:|",
+        "| case | iterations | join goal (ms) | join (ms) | re-solve goal (ms) "
+        "| re-solve cold / warm (ms) | factor + back-solves (ms) | local steps (ms) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for c in rows:
         p = c["phases_raw"]
-        goal, stretch = (None if t is None else t * 1e-3 for t in _target(c))
+        goal, again = (None if t is None else t * 1e-3 for t in _target(c))
+        r = c.get("resolve")
+        resolved = "—" if not r else f"{_ms(r['cold_seconds'])} / {_ms(r['warm_seconds'])}"
         lines.append(
-            f"| {c['name']} | {c['iterations']} | {_ms(goal)} | {_ms(stretch)} | "
-            f"{_ms(p['factor'] + p['back_solve'])} | {_ms(p['local'])} | "
-            f"{_ms(c['join_seconds'])} |"
+            f"| {c['name']} | {c['iterations']} | {_ms(goal)} | {_ms(c['join_seconds'])} | "
+            f"{_ms(again)} | {resolved} | {_ms(p['factor'] + p['back_solve'])} | "
+            f"{_ms(p['local'])} |"
         )
     return lines
 
 
+def _resolve_table(cases: list[dict]) -> list[str]:
+    rows = [c for c in cases if c.get("resolve")]
+    if not rows:
+        return []
+    lines = [
+        "",
+        "### Re-solves through one JoinSolver (the factorization reused)",
+        "",
+        "The seam targets turned by 1°, 2°, ... about an axis through their centroid (a "
+        "slider), one `solve(targets)` per step from the initial guess (*cold*) and one "
+        "`solve(targets, start=previous)` (*warm*); medians, milliseconds, whole `solve()` "
+        "including the result's metrics. *factorizations*: made during all the re-solves. "
+        "*gap*: largest (E_warm − E_cold) / E_cold.",
+        "",
+        "| case | cold (ms) | cold iterations | warm (ms) | warm iterations | factorizations "
+        "| gap |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for c in rows:
+        r = c["resolve"]
+        lines.append(
+            f"| {c['name']} | {_ms(r['cold_seconds'])} | "
+            f"{statistics.median(r['cold_iterations']):.0f} | {_ms(r['warm_seconds'])} | "
+            f"{statistics.median(r['warm_iterations']):.0f} | {r['factorizations']} | "
+            f"{r['max_warm_cold_gap']:.1e} |"
+        )
+    paper = [c for c in rows if c["spec"]["kind"] == "paper"]
+    if paper:
+        cold = statistics.median(c["resolve"]["cold_seconds"] for c in paper)
+        warm = statistics.median(c["resolve"]["warm_seconds"] for c in paper)
+        lines.append(
+            f"\nMedian re-solve over the six paper samples: **{_ms(cold)} ms** cold, "
+            f"**{_ms(warm)} ms** warm."
+        )
+    return lines
+
+
+def _host_table(cases: list[dict]) -> list[str]:
+    rows = [c for c in cases if c["spec"]["kind"] == "host"]
+    if not rows:
+        return []
+    lines = [
+        "",
+        "### A large host with a paper-sized guest",
+        "",
+        "The paper's partial-patch guest on a 350° aortic wall 300 mm long with the same "
+        "hole (`pipelines/benchmark.py`, `_BIG_HOST`). *first*: the first join in the "
+        "process (nothing cached); *join*: median of the timed runs; *setup* includes "
+        "checking the host near its curve and selecting the curve; *whole host checked*: "
+        "median of 3 joins in the same process with the whole host checked and its curve "
+        "selected among all its loops (the path of a small host).",
+        "",
+        "| case | host vertices | host faces | guest vertices | first join (ms) | join (ms) "
+        "| setup | iterate | metrics | whole host checked (ms) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for c in rows:
+        p = c["phases_raw"]
+        lines.append(
+            f"| {c['name']} | {c['host_vertices']:,} | {c['host_faces']:,} | "
+            f"{c['counts']['points']:,} | {_ms(c.get('first_join_seconds'))} | "
+            f"{_ms(c['join_seconds'])} | {_ms(c['phases']['setup'])} | {_ms(p['iterate'])} | "
+            f"{_ms(p['metrics'])} | {_ms(c.get('whole_host_join_seconds'))} |"
+        )
+    return lines
+
+
+def _iteration_table(cases: list[dict]) -> list[str]:
+    """Iterations to convergence by guest size: plain local/global, accelerated, warm re-solve."""
+    rows = [
+        c
+        for c in cases
+        if (c["spec"]["kind"] == "paper" and c["spec"]["length"] == "equal")
+        or c["spec"]["kind"] in ("patch", "tube")
+    ]
+    if not rows:
+        return []
+    lines = [
+        "",
+        "### Iterations by guest size",
+        "",
+        "*plain*: the paper's local/global iteration (`acceleration=0`) to `tolerance=1e-12` "
+        "where affordable; *accelerated*: the solver igljoin uses (L-BFGS on the factored "
+        "preconditioner, default tolerance); *warm re-solve*: after a 1° slider step.",
+        "",
+        "| case | guest vertices | plain | accelerated | warm re-solve |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    for c in rows:
+        p = c.get("plain")
+        plain = "—" if not p else f"{p['iterations']}" + ("" if p["converged"] else " (cap)")
+        its = str(c["iterations"]) + ("" if c["converged"] else " (time limit)")
+        r = c.get("resolve")
+        warm = "—" if not r else f"{statistics.median(r['warm_iterations']):.0f}"
+        lines.append(f"| {c['name']} | {c['counts']['points']:,} | {plain} | {its} | {warm} |")
+    return lines
+
+
+def _kind_rank(case: dict) -> tuple:
+    """Position of a case in a full run: paper samples, the large host, guests by size."""
+    spec = case["spec"]
+    rank = {"paper": 0, "host": 1}.get(spec["kind"], 2)
+    return (rank, spec.get("vertices", 0))
+
+
 def _name(spec: dict) -> str:
+    if spec["kind"] == "host":
+        return "patch on large host"
     if spec["kind"] == "paper":
         return f"{spec['scenario']}/{spec['length']}"
     v = spec["vertices"]
@@ -535,6 +736,11 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", type=int, help="throughput cases (default 20, quick 8)")
     ap.add_argument("--sizes", help="large guests, comma-separated vertex counts")
     ap.add_argument("--out", help="output folder (default docs/, quick: benchmark-quick/)")
+    ap.add_argument(
+        "--only",
+        help="run only the cases of these kinds (comma-separated: paper, host, patch, tube) "
+        "and replace them in the existing benchmarks.json",
+    )
     ap.add_argument("--worker", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
@@ -552,9 +758,17 @@ def main(argv=None) -> int:
     million_budget = 600.0  # seconds of iteration for the 1M guest (reported if it stops there)
     out_dir = Path(args.out) if args.out else ROOT / ("benchmark-quick" if args.quick else "docs")
     specs = [
-        {"kind": "paper", "scenario": sc, "length": ln, "runs": runs, "plain_iterations": plain}
+        {
+            "kind": "paper",
+            "scenario": sc,
+            "length": ln,
+            "runs": runs,
+            "plain_iterations": plain,
+            "resolves": runs,
+        }
         for sc, ln in SAMPLES
     ]
+    specs.append({"kind": "host", "runs": runs, "arap_runs": 1})
     for v in sizes:
         big = v >= 100_000
         specs.append(
@@ -565,9 +779,20 @@ def main(argv=None) -> int:
                 "arap_runs": 0 if v >= 1_000_000 else 1,
                 "warmup": not big,
                 "time_limit": million_budget if v >= 1_000_000 else None,
+                # the long plain run is affordable up to ~10k vertices (minutes)
+                "plain_iterations": plain if v <= 10_000 else None,
             }
         )
     results = {"machine": _machine(), "cases": []}
+    kept_cases = []
+    if args.only:
+        kinds = set(args.only.split(","))
+        specs = [sp for sp in specs if sp["kind"] in kinds]
+        n_cases = 0
+        previous = json.loads((out_dir / "benchmarks.json").read_text())
+        kept_cases = [c for c in previous["cases"] if c["spec"]["kind"] not in kinds]
+        results["throughput"] = previous.get("throughput")
+        results["machine"]["earlier_runs"] = previous["machine"]
     for spec in specs:
         name = _name(spec)
         print(f"{name} ...", end=" ", flush=True)
@@ -585,6 +810,16 @@ def main(argv=None) -> int:
         print("throughput ...", end=" ", flush=True)
         results["throughput"] = throughput(n_cases)
         print(f"{results['throughput']['scaling']:.2f}x", flush=True)
+    if args.only:
+        new_cases = results["cases"]
+        results["cases"] = kept_cases
+        for c in new_cases:
+            # back where the full run puts it: before the first case of a later kind
+            at = next(
+                (i for i, k in enumerate(results["cases"]) if _kind_rank(k) > _kind_rank(c)),
+                len(results["cases"]),
+            )
+            results["cases"].insert(at, c)
     results["machine"]["load_average_end"] = os.getloadavg()
     out_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out_dir / "benchmarks.json", json.dumps(results, indent=1))

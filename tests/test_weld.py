@@ -396,3 +396,14 @@ def test_save_into_a_file_is_refused(cases, tmp_path):
     target.write_text("x")
     with pytest.raises(NotADirectoryError, match="not a folder"):
         cases["partial_patch/equal"].res.save(target)
+
+
+def test_zero_area_guest_face_far_from_the_seam_is_found(small):
+    """The area check runs on every guest face, not only at the seam (the join moves them all)."""
+    res = small[1]
+    X = res.guest.V.copy()
+    far = np.flatnonzero(~np.isin(res.guest.F, res.seam).any(axis=1))
+    a, b, c = res.guest.F[far[-1]]
+    X[c] = 0.5 * (X[a] + X[b])  # the face collapses onto one of its edges
+    with pytest.raises(igljoin.WeldError, match="zero area"):
+        weld(_with_guest(res, X, res.guest.F))
