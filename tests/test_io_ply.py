@@ -269,3 +269,16 @@ def test_binary_block_reader_equals_row_reader(monkeypatch, name):
     assert list(fast.vertex_attributes) == list(slow.vertex_attributes)
     for key, value in fast.vertex_attributes.items():
         np.testing.assert_array_equal(value, slow.vertex_attributes[key], err_msg=key)
+
+
+@pytest.mark.parametrize("order", ["<", ">"])
+def test_corrupt_list_count_is_truncated_without_allocating(tmp_path, order):
+    """A face claiming 4,294,967,295 corners (16 GiB of indices) in a small file."""
+    data = bytearray(_typed_file(order, "int", "uint", "int", TRIANGLES))
+    count = data.index(b"end_header\n") + 11 + 4 * (4 + 4 + 8 + 4 + 1) + 6 * 4 + 4
+    assert np.frombuffer(data, order + "u4", 1, count)[0] == 3  # the first face's corner count
+    data[count : count + 4] = b"\xff" * 4
+    path = tmp_path / "m.ply"
+    path.write_bytes(bytes(data))
+    with pytest.raises(MeshReadError, match=r"is truncated: .*'face': row 0: property 'vertex_in"):
+        read_mesh(path)

@@ -12,6 +12,7 @@ the user.
 
 from __future__ import annotations
 
+import os
 import re
 import struct
 from dataclasses import dataclass, field
@@ -174,15 +175,25 @@ class _Stream:
     def __init__(self, fh: BinaryIO, pos: int):
         fh.seek(pos)
         self.fh, self.buf, self.off = fh, b"", 0
+        self.unread = max(os.fstat(fh.fileno()).st_size - pos, 0)
 
     def need(self, n: int) -> bool:
-        """Make ``n`` bytes from the current position available; False if the file ends first."""
-        while len(self.buf) - self.off < n:
-            more = self.fh.read(max(BLOCK_BYTES, n - len(self.buf) + self.off))
+        """Make ``n`` bytes from the current position available; False if the file ends first.
+
+        A request beyond the end of the file (a corrupt count) is refused before
+        anything is read or allocated.
+        """
+        have = len(self.buf) - self.off
+        if n > have + self.unread:
+            return False
+        while have < n:
+            more = self.fh.read(min(max(BLOCK_BYTES, n - have), self.unread))
             if not more:
                 return False
+            self.unread -= len(more)
             self.buf = self.buf[self.off :] + more
             self.off = 0
+            have = len(self.buf)
         return True
 
 
@@ -266,6 +277,8 @@ def _fixed_layout(stream: _Stream, element: Element, order: str) -> dict | None:
             fields.append((f"n{j}", order + prop.count_dtype))
             fields.append((f"p{j}", order + prop.dtype, (n,)))
             width += size + n * np.dtype(prop.dtype).itemsize
+            if not stream.need(width):
+                return None  # a count beyond the end of the file: the row reader reports it
         else:
             fields.append((f"p{j}", order + prop.dtype))
             width += np.dtype(prop.dtype).itemsize

@@ -146,8 +146,8 @@ def _check_ply_start(path: Path) -> bool:
     return b"\nformat ascii" in head.split(b"end_header", 1)[0]
 
 
-def _read_ply_data(path: Path) -> dict[str, dict]:
-    """Every element's properties (see :func:`._ply_parse.read_elements`)."""
+def _read_ply_data(path: Path) -> tuple[Header, dict[str, dict]]:
+    """The header and every element's properties (see :func:`._ply_parse.read_elements`)."""
     _check_ply_start(path)
     try:
         with open(path, "rb") as fh:
