@@ -8,6 +8,10 @@ coordinates, a list property of floats).
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -282,3 +286,30 @@ def test_corrupt_list_count_is_truncated_without_allocating(tmp_path, order):
     path.write_bytes(bytes(data))
     with pytest.raises(MeshReadError, match=r"is truncated: .*'face': row 0: property 'vertex_in"):
         read_mesh(path)
+
+
+def test_reading_and_writing_ply_never_imports_plyfile(tmp_path):
+    """plyfile (GPL-3.0) is not a dependency: PLY works with its import blocked."""
+    script = textwrap.dedent(
+        f"""
+        import sys
+        class Block:
+            def find_spec(self, name, path=None, target=None):
+                if name.split(".")[0] == "plyfile":
+                    raise ImportError("plyfile is blocked")
+        sys.meta_path.insert(0, Block())
+        from igljoin.io import read_mesh, write_mesh
+        for name in ("bone.ply", "colored_airplane.ply"):
+            mesh = read_mesh({str(SAMPLES)!r} + "/" + name)
+            for binary in (True, False):
+                write_mesh({str(tmp_path)!r} + "/m.ply", mesh, binary=binary)
+                assert read_mesh({str(tmp_path)!r} + "/m.ply").n_faces == mesh.n_faces
+        print("plyfile" in sys.modules)
+        """
+    )
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
+    proc = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120, env=env
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "False"
