@@ -186,7 +186,7 @@ def test_stl_fast_equals_reference(tmp_path, monkeypatch):
     assert "error" in kinds
 
 
-def test_ascii_ply_fast_equals_plyfile(tmp_path, monkeypatch):
+def test_ascii_ply_fast_equals_row_reader(tmp_path, monkeypatch):
     rng = np.random.default_rng(11)
     mesh = _grid(8, 4)
     mesh = mesh.with_attributes(
@@ -251,7 +251,7 @@ def test_merge_vertices_equals_numpy_unique(monkeypatch):
 
 @pytest.mark.parametrize("keep", [0, 1, 2, 3])
 def test_ascii_ply_with_missing_rows_is_truncated(tmp_path, keep):
-    """Fewer rows than the header declares go to plyfile, which reports the truncation."""
+    """Fewer rows than the header declares go to the row-by-row reader, which reports it."""
     rows = ["0 0 0", "1 0 0", "0 1 0", "3 0 1 2"][:keep]
     header = (
         "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"

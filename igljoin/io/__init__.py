@@ -4,9 +4,10 @@ Formats are chosen from the file suffix (case-insensitive); each has its own
 module (:mod:`.obj`, :mod:`.off`, :mod:`.ply`, :mod:`.stl`, :mod:`.vtk`),
 imported on first use.
 
-* PLY is read and written with :mod:`plyfile` (ASCII and binary, any mix of
-  property types), with vectorised fast paths for plain ASCII files. Extra
-  scalar vertex and face properties become :attr:`Mesh.vertex_attributes` /
+* PLY is read and written by igljoin's own code (ASCII and binary, any mix
+  of property types), with vectorised paths for binary elements of
+  fixed-size rows and for plain ASCII files. Extra scalar vertex and face
+  properties become :attr:`Mesh.vertex_attributes` /
   :attr:`Mesh.face_attributes`.
 * OBJ, OFF and STL are parsed with vectorised numpy, block by block, with a
   record-by-record reference parser for unusual blocks that gives every

@@ -1,24 +1,23 @@
-"""PLY reading and writing through :mod:`plyfile`, with vectorised ASCII fast paths.
+"""PLY reading and writing, with vectorised ASCII fast paths.
 
-* Binary PLY is parsed by plyfile (triangle lists memory-mapped read-only,
-  then copied).
-* ASCII PLY whose header is a plain ``vertex`` + ``face`` layout (scalar
-  properties, one face list of triangles) is parsed with vectorised numpy;
-  anything else goes to plyfile, which also gives every error message.
+* Reading: :mod:`._ply_parse` reads the header and every element, ASCII or
+  binary (little or big endian), any property types and list count types;
+  binary elements with rows of one size (triangle faces) in one
+  :func:`numpy.frombuffer` call. ASCII PLY whose header is a plain
+  ``vertex`` + ``face`` layout (scalar properties, one face list of
+  triangles) is parsed here with vectorised numpy; any other file, and any
+  file the fast path declines, goes to the row-by-row reader, which gives
+  every error message.
 * Writing: binary little-endian from packed numpy records, or ASCII with
-  :func:`numpy.savetxt` (``%.17g``, exact); both are many times faster than
-  plyfile's writer (0.02 s against 0.9 s binary, 1.4 s against 14 s ASCII,
-  on the 90k-vertex benchmark grid).
+  :func:`numpy.savetxt` (``%.17g``, exact).
 """
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
-import plyfile
 
 from ..errors import MeshError, MeshReadError
 from ..mesh import Mesh
@@ -33,44 +32,35 @@ from ._common import (
     scan,
     split_lines,
 )
+from ._ply_parse import (
+    PLY_TYPES,
+    Element,
+    Header,
+    HeaderError,
+    Property,
+    RowError,
+    parse_header,
+    read_elements,
+)
 
 _FACE_LIST_NAMES = ("vertex_indices", "vertex_index")
 _INT32 = np.iinfo(np.int32)
 _PLY_HEADER_SCAN = 1 << 20  # bytes read to find the PLY header (headers are far smaller)
-_PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
-    "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
-}  # fmt: skip
 _PLY_NAMES = {"i1": "char", "u1": "uchar", "i4": "int", "f8": "double"}
 
 
-def _ply_parse(path: Path, fast: bool, text: bool) -> plyfile.PlyData:
-    """Parse with plyfile; ``fast`` memory-maps binary triangle lists (read-only).
-
-    ASCII files are opened in text mode here: plyfile would otherwise wrap the
-    binary handle in a text wrapper that it never closes.
-    """
-    known = {"face": dict.fromkeys(_FACE_LIST_NAMES, 3)} if fast else {}
-    opened = open(path, encoding="ascii") if text else open(path, "rb")
-    with opened as fh, warnings.catch_warnings():
-        # plyfile lets numpy warn about empty ASCII lists; those faces are reported below
-        warnings.simplefilter("ignore", UserWarning)
-        return plyfile.PlyData.read(fh, mmap="r", known_list_len=known)
-
-
 def _ply_parse_error(path: Path, exc: Exception) -> MeshReadError:
-    """Translate any plyfile/numpy/decoding failure into a clear MeshReadError."""
+    """Translate a header, row or decoding failure into a clear MeshReadError."""
     detail = str(exc) or type(exc).__name__
-    if isinstance(exc, plyfile.PlyHeaderParseError):
+    if isinstance(exc, HeaderError):
         return error(path, f"has a malformed PLY header ({detail})", "re-export the file")
-    if isinstance(exc, plyfile.PlyElementParseError) and exc.message == "early end-of-file":
+    if isinstance(exc, RowError) and exc.kind == "eof":
         return error(
             path,
             f"is truncated: the data ends before the header's counts are reached ({detail})",
             "re-export or re-download the file",
         )
-    if isinstance(exc, plyfile.PlyElementParseError) and exc.message == "early end-of-line":
+    if isinstance(exc, RowError) and exc.kind == "eol":
         return error(
             path,
             f"is truncated or has a row with too few values ({detail})",
@@ -102,7 +92,7 @@ def _ply_declared_counts(head: bytes) -> list[tuple[str, int]]:
     Returns
     -------
     list of (str, int)
-        Empty if the header cannot be read this way; plyfile then reports it.
+        Empty if the header cannot be read this way; the header parser then reports it.
     """
     end = head.find(b"end_header")
     if end < 0:
@@ -156,38 +146,37 @@ def _check_ply_start(path: Path) -> bool:
     return b"\nformat ascii" in head.split(b"end_header", 1)[0]
 
 
-def _read_ply_data(path: Path) -> plyfile.PlyData:
-    """Parse a PLY file, memory-mapping binary triangle data when possible."""
-    text = _check_ply_start(path)
+def _read_ply_data(path: Path) -> tuple[Header, dict[str, dict]]:
+    """The header and every element's properties (see :func:`._ply_parse.read_elements`)."""
+    _check_ply_start(path)
     try:
-        return _ply_parse(path, fast=True, text=text)
-    except plyfile.PlyElementParseError as exc:
-        if "unexpected list length" not in exc.message:
-            raise _ply_parse_error(path, exc) from None
-    except Exception as exc:  # any parser failure becomes a MeshReadError
-        raise _ply_parse_error(path, exc) from None
-    try:  # faces are not all triangles: read the variable-length lists row by row
-        return _ply_parse(path, fast=False, text=text)
+        with open(path, "rb") as fh:
+            header = parse_header(fh.read(_PLY_HEADER_SCAN))
+            return header, read_elements(fh, header)
     except Exception as exc:  # any parser failure becomes a MeshReadError
         raise _ply_parse_error(path, exc) from None
 
 
-def _scalar_columns(element, skip: set) -> dict:
+def _scalar_columns(element: Element, values: dict, skip: set) -> dict:
     """Float64 copies of every scalar property of ``element`` not in ``skip``."""
     out = {}
     for prop in element.properties:
-        if prop.name in skip or isinstance(prop, plyfile.PlyListProperty):
+        if prop.name in skip or prop.is_list:
             continue
-        out[attribute_name(prop.name)] = np.array(element.data[prop.name], dtype=np.float64)
+        out[attribute_name(prop.name)] = np.asarray(values[prop.name], dtype=np.float64)
     return out
 
 
-def _ply_vertices(path: Path, ply: plyfile.PlyData) -> tuple[np.ndarray, dict]:
-    names = [e.name for e in ply.elements]
-    if "vertex" not in names:
+def _element(header: Header, name: str) -> Element | None:
+    """The first element called ``name``, or None."""
+    return next((e for e in header.elements if e.name == name), None)
+
+
+def _ply_vertices(path: Path, header: Header, data: dict) -> tuple[np.ndarray, dict]:
+    element = _element(header, "vertex")
+    if element is None:
         raise error(path, "has no 'vertex' element", "this PLY file holds no mesh vertices")
-    element = ply["vertex"]
-    scalars = {p.name for p in element.properties if not isinstance(p, plyfile.PlyListProperty)}
+    scalars = {p.name for p in element.properties if not p.is_list}
     missing = [c for c in "xyz" if c not in scalars]
     if missing:
         raise error(
@@ -195,23 +184,18 @@ def _ply_vertices(path: Path, ply: plyfile.PlyData) -> tuple[np.ndarray, dict]:
             f"vertex element lacks the coordinate properties {missing}",
             "vertices need scalar properties x, y and z",
         )
-    V = np.column_stack([np.asarray(element.data[c], dtype=np.float64) for c in "xyz"])
-    return V.reshape(-1, 3), _scalar_columns(element, {"x", "y", "z"})
+    values = data["vertex"]
+    V = np.column_stack([np.asarray(values[c], dtype=np.float64) for c in "xyz"])
+    return V.reshape(-1, 3), _scalar_columns(element, values, {"x", "y", "z"})
 
 
-def _ply_polygons(path: Path, element, prop_name: str) -> tuple[np.ndarray, np.ndarray]:
+def _ply_polygons(path: Path, prop: Property, column: tuple) -> tuple[np.ndarray, np.ndarray]:
     """Concatenated indices (s,) and polygon sizes (p,) of a face list property."""
-    column = element.data[prop_name]
-    if column.dtype != object:  # memory-mapped fixed-length lists: shape (p, k)
-        lengths = np.full(column.shape[0], column.shape[1], dtype=np.int64)
-        flat = column.reshape(-1)
-    else:
-        lengths = np.fromiter((len(r) for r in column), dtype=np.int64, count=column.shape[0])
-        flat = np.concatenate([np.asarray(row).reshape(-1) for row in column])
-    if not np.issubdtype(flat.dtype, np.integer):
+    flat, lengths = column
+    if np.dtype(prop.dtype).kind not in "iu":
         raise error(
             path,
-            f"face vertex indices are stored as {flat.dtype}, not integers",
+            f"face vertex indices are stored as {np.dtype(prop.dtype)}, not integers",
             "re-export the mesh with integer face indices",
         )
     small = np.flatnonzero(lengths < 3)
@@ -225,22 +209,22 @@ def _ply_polygons(path: Path, element, prop_name: str) -> tuple[np.ndarray, np.n
     return flat.astype(np.int64), lengths
 
 
-def _ply_faces(path: Path, ply: plyfile.PlyData) -> tuple[np.ndarray, dict]:
-    names = [e.name for e in ply.elements]
-    if "face" not in names or ply["face"].count == 0:
+def _ply_faces(path: Path, header: Header, data: dict) -> tuple[np.ndarray, dict]:
+    element = _element(header, "face")
+    if element is None or element.count == 0:
         return np.empty((0, 3), dtype=np.int64), {}
-    element = ply["face"]
-    lists = [p.name for p in element.properties if isinstance(p, plyfile.PlyListProperty)]
+    lists = {p.name: p for p in element.properties if p.is_list}
     found = [n for n in _FACE_LIST_NAMES if n in lists]
     if not found:
         raise error(
             path,
-            f"face element has no 'vertex_indices' list property (lists: {lists})",
+            f"face element has no 'vertex_indices' list property (lists: {list(lists)})",
             "re-export the mesh with standard PLY faces",
         )
-    flat, lengths = _ply_polygons(path, element, found[0])
+    values = data["face"]
+    flat, lengths = _ply_polygons(path, lists[found[0]], values[found[0]])
     F, owner = fan_triangulate(flat, lengths)
-    attrs = _scalar_columns(element, set())
+    attrs = _scalar_columns(element, values, set())
     return F, {key: value[owner] for key, value in attrs.items()}
 
 
@@ -249,9 +233,9 @@ def read(path: Path) -> Arrays:
     arrays = _read_ascii_fast(path)
     if arrays is not None:
         return arrays
-    ply = _read_ply_data(path)
-    V, vattrs = _ply_vertices(path, ply)
-    F, fattrs = _ply_faces(path, ply)
+    header, data = _read_ply_data(path)
+    V, vattrs = _ply_vertices(path, header, data)
+    F, fattrs = _ply_faces(path, header, data)
     return V, F, vattrs, fattrs
 
 
@@ -307,7 +291,7 @@ def _structured(columns: list, count: int) -> np.ndarray:
 
 # --------------------------------------------------------------------------- ASCII fast paths
 
-_FAST_ASCII_BYTES = 1 << 31  # larger ASCII files are left to plyfile's streaming reader
+_FAST_ASCII_BYTES = 1 << 31  # larger ASCII files go to the row-by-row reader
 
 
 def _ascii_header(data: bytes) -> tuple[int, list] | None:
@@ -330,15 +314,13 @@ def _ascii_header(data: bytes) -> tuple[int, list] | None:
         elif tokens[0] == "element" and len(tokens) == 3 and tokens[2].isdigit():
             elements.append((tokens[1], int(tokens[2]), []))
         elif tokens[0] == "property" and elements and len(tokens) == 3:
-            if tokens[1] not in _PLY_TYPES:
+            if tokens[1] not in PLY_TYPES:
                 return None
-            elements[-1][2].append((tokens[2], _PLY_TYPES[tokens[1]]))
+            elements[-1][2].append((tokens[2], PLY_TYPES[tokens[1]]))
         elif tokens[0] == "property" and elements and len(tokens) == 5 and tokens[1] == "list":
-            if tokens[2] not in _PLY_TYPES or tokens[3] not in _PLY_TYPES:
+            if tokens[2] not in PLY_TYPES or tokens[3] not in PLY_TYPES:
                 return None
-            elements[-1][2].append(
-                (tokens[4], "list", _PLY_TYPES[tokens[2]], _PLY_TYPES[tokens[3]])
-            )
+            elements[-1][2].append((tokens[4], "list", PLY_TYPES[tokens[2]], PLY_TYPES[tokens[3]]))
         else:
             return None
     return end + len(b"\nend_header\n"), elements
@@ -365,9 +347,9 @@ def _table(block: list[bytes], width: int) -> np.ndarray | None:
 
 
 def _read_ascii_fast(path: Path) -> Arrays | None:
-    """Vertices, triangles and scalar properties of a plain ASCII PLY, or None (use plyfile)."""
+    """Vertices, triangles and scalar properties of a plain ASCII PLY, or None (read row by row)."""
     if not _check_ply_start(path) or path.stat().st_size > _FAST_ASCII_BYTES:
-        return None  # binary (memory-mapped by plyfile), or too large to hold whole
+        return None  # binary, or too large for the fast path
     with open(path, "rb") as fh:
         data = fh.read()
     parsed = _ascii_header(data)
@@ -390,7 +372,7 @@ def _read_ascii_fast(path: Path) -> Arrays | None:
         return None
     lines = split_lines(data[offset:])
     if len(lines) < n_v + n_f or any(line.strip() for line in lines[n_v + n_f :]):
-        return None  # truncated, or more than the header declares: plyfile reports it
+        return None  # truncated, or more than the header declares: reported row by row
     vtable = _table(lines[:n_v], len(vprops))
     ftable = _table(lines[n_v : n_v + n_f], 4 + len(fprops) - 1)
     if vtable is None or ftable is None or not (ftable[:, 0] == 3).all():
