@@ -73,7 +73,7 @@ def test_info_loads_neither_libigl_nor_the_solver_nor_the_optional_parts(tmp_pat
             assert main(["info", {str(cube)!r}]) == 0
         """
     )
-    # numpy, scipy.sparse (connected components) and plyfile are what it needs
+    # numpy and scipy.sparse (connected components) are what it needs
     unneeded = {"igl", "scipy.spatial", "numba", "pymeshlab", "polyscope", "PIL", "dask"}
     assert not unneeded & set(got["loaded"]), got
 
