@@ -68,6 +68,7 @@ from .boundary import Curve, select_curve
 from .errors import IgljoinError, OptionsError, OutputError, SpecError, missing_extra
 from .io import WRITE_SUFFIXES, output_formats, read_mesh
 from .join import JoinSolver
+from .options import JoinOptions
 from .outputs import (
     MANIFEST,
     STAGING_MARK,
@@ -180,8 +181,15 @@ def _has_curve(c: Curve) -> bool:
     return any(getattr(c, k) is not None for k in ("indices", "start", "end", "via", "loop"))
 
 
-def _clean_meshes(spec: CaseSpec, host, guest, hc: Curve, gc: Curve, options: dict, extra: dict):
-    """Cleanup and resampling of a case; returns the meshes, curves and options to join."""
+def _clean_meshes(
+    spec: CaseSpec, host, guest, hc: Curve, gc: Curve, options: JoinOptions, extra: dict
+):
+    """Cleanup and resampling of a case; returns the meshes, curves and options to join.
+
+    The options are the case's own unless cleanup renumbered the guest's
+    vertices: then a per-vertex stiffness follows them (a new, validated
+    :class:`JoinOptions`; the case's options are never changed).
+    """
     from .clean import clean, resample
 
     c = spec.cleanup
@@ -200,15 +208,15 @@ def _clean_meshes(spec: CaseSpec, host, guest, hc: Curve, gc: Curve, options: di
             if role == "host":
                 host, hc = cleaned, curve
             else:
-                k = options.get("stiffness")
+                k = options.stiffness
                 if k is not None and rep.total:
-                    if len(k) != mesh.n_vertices or options.get("stiffness_on") == "face":
+                    if len(k) != mesh.n_vertices or options.stiffness_on == "face":
                         raise SpecError(
                             f"{spec.name}: a per-face stiffness cannot follow cleanup of the "
                             "guest (it changed faces); give stiffness per vertex or clean the "
                             "guest beforehand with `igljoin clean`"
                         )
-                    options = {**options, "stiffness": np.asarray(k)[rep.source]}
+                    options = options.replace(stiffness=k[rep.source])
                 guest, gc = cleaned, curve
     r = spec.resample
     if r is not None:
@@ -290,7 +298,7 @@ def solve_case(spec: CaseSpec, *, step: _Step | None = None, progress: Any = Non
     t = time.perf_counter()
     step.name = "clean"
     extra: dict[str, Any] = {}
-    hc, gc, options = spec.host_curve, spec.guest_curve, dict(spec.options)
+    hc, gc, options = spec.host_curve, spec.guest_curve, spec.options
     if spec.cleanup is not None or spec.resample is not None:
         host, guest, hc, gc, options = _clean_meshes(spec, host, guest, hc, gc, options, extra)
     timings["clean"] = time.perf_counter() - t

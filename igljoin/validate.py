@@ -369,6 +369,8 @@ def orientable(F: np.ndarray) -> bool:
     some edge is still traversed twice in the same direction afterwards, no
     orientation exists (a Möbius strip).
     """
+    import igl  # here, not at the top: libigl costs start-up time (igljoin info)
+
     FF, _ = igl.bfs_orient(np.ascontiguousarray(F, dtype=np.int64))
     FF = np.asarray(FF)
     n = int(F.max()) + 1
