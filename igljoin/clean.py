@@ -22,6 +22,7 @@ install (``pip install 'igljoin[meshlab]'``).
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -36,18 +37,95 @@ from .mesh import Mesh, as_mesh
 from .validate import relative_area_floor
 
 __all__ = [
+    "MAX_HOLE_EDGES",
+    "MIN_COMPONENT_FACES",
+    "RESAMPLE_ITERATIONS",
     "SLIVER_RATIO",
     "CleanReport",
     "ResampleReport",
     "clean",
+    "clean_setting_problem",
     "diagnose",
     "resample",
+    "resample_setting_problem",
 ]
 
 #: Faces whose aspect ratio ``2 r / R`` (inradius over circumradius, 1 for an
 #: equilateral triangle) is below this value count as slivers. Real scans hold
 #: a few faces around 1e-2 that join fine; 1e-3 only catches near-degenerate ones.
 SLIVER_RATIO = 1e-3
+
+#: Default of :func:`clean`'s ``max_hole_edges``: holes of up to 30 boundary
+#: edges are scan drop-outs; larger ones are openings of the anatomy.
+MAX_HOLE_EDGES = 30
+#: Default of :func:`clean`'s ``min_component_faces``: loose pieces smaller than
+#: this are scan debris.
+MIN_COMPONENT_FACES = 10
+#: Default of :func:`resample`'s ``iterations`` (enough for an even mesh).
+RESAMPLE_ITERATIONS = 10
+#: Largest value a pymeshlab integer parameter takes (a C++ ``int``).
+_C_INT_MAX = 2**31 - 1
+#: Most remeshing iterations :func:`resample` runs (each one passes over every face).
+MAX_RESAMPLE_ITERATIONS = 100
+
+
+def _is_integer(value: Any, low: int, high: int) -> bool:
+    return (
+        not isinstance(value, bool)
+        and isinstance(value, (int, np.integer))
+        and low <= value <= high
+    )
+
+
+def clean_setting_problem(
+    max_hole_edges: Any, sliver_ratio: Any, min_component_faces: Any
+) -> tuple[str, Any, str] | None:
+    """The first out-of-range setting of :func:`clean`, or ``None`` if all are valid.
+
+    The one rule for these settings, shared by :func:`clean` and
+    :class:`igljoin.spec.CleanupSpec` (each words the error its own way).
+
+    Returns
+    -------
+    (name, value, requirement) or None
+        ``requirement`` completes "``name`` = ``value`` ...", e.g. "must be a
+        number in [0, 1)".
+    """
+    for name, value, low in (
+        ("max_hole_edges", max_hole_edges, 3),
+        ("min_component_faces", min_component_faces, 0),
+    ):
+        if not _is_integer(value, low, _C_INT_MAX):
+            return name, value, f"must be an integer from {low} to {_C_INT_MAX:,}"
+    if isinstance(sliver_ratio, bool) or not (
+        isinstance(sliver_ratio, (int, float, np.integer, np.floating)) and 0 <= sliver_ratio < 1
+    ):
+        return "sliver_ratio", sliver_ratio, "must be a number in [0, 1)"
+    return None
+
+
+def resample_setting_problem(target_edge: Any, iterations: Any) -> tuple[str, Any, str] | None:
+    """The first out-of-range setting of :func:`resample`, or ``None`` if both are valid.
+
+    Shared by :func:`resample` and :class:`igljoin.spec.ResampleSpec`; see
+    :func:`clean_setting_problem`.
+    """
+    try:
+        target = float(target_edge)
+    except (TypeError, ValueError, OverflowError):  # 10**400, a complex number
+        target = float("nan")
+    number = isinstance(target_edge, numbers.Real) and not isinstance(target_edge, bool)
+    if not (number and math.isfinite(target) and target > 0):
+        return "target_edge", target_edge, "must be a positive length"
+    if not _is_integer(iterations, 1, MAX_RESAMPLE_ITERATIONS):
+        return (
+            "iterations",
+            iterations,
+            f"must be an integer from 1 to {MAX_RESAMPLE_ITERATIONS} (the default "
+            f"{RESAMPLE_ITERATIONS} is enough for an even mesh)",
+        )
+    return None
+
 
 #: Fixes reported by :func:`clean`, in the order they are applied.
 FIXES = (
@@ -550,9 +628,9 @@ def clean(
     *,
     close_holes: bool = False,
     keep_boundary: Any = None,
-    max_hole_edges: int = 30,
+    max_hole_edges: int = MAX_HOLE_EDGES,
     sliver_ratio: float = SLIVER_RATIO,
-    min_component_faces: int = 10,
+    min_component_faces: int = MIN_COMPONENT_FACES,
 ) -> tuple[Mesh, CleanReport]:
     """Repair a mesh so that it can be joined.
 
@@ -623,22 +701,10 @@ def clean(
     (3, True)
     """
     m = as_mesh(mesh)
-    for name, value, low in (
-        ("max_hole_edges", max_hole_edges, 3),
-        ("min_component_faces", min_component_faces, 0),
-    ):
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, (int, np.integer))
-            or not low <= value <= _C_INT_MAX
-        ):
-            raise MeshError(
-                f"clean: {name}={_short(value)} must be an integer from {low} to {_C_INT_MAX:,}"
-            )
-    if isinstance(sliver_ratio, bool) or not (
-        isinstance(sliver_ratio, (int, float)) and 0 <= sliver_ratio < 1
-    ):
-        raise MeshError(f"clean: sliver_ratio={sliver_ratio!r} must be a number in [0, 1)")
+    problem = clean_setting_problem(max_hole_edges, sliver_ratio, min_component_faces)
+    if problem is not None:
+        name, value, requirement = problem
+        raise MeshError(f"clean: {name}={_short(value)} {requirement}")
     ml = _pymeshlab("igljoin.clean (mesh repair)")
     before = diagnose(m, sliver_ratio=sliver_ratio)
     counts: dict[str, int] = {k: 0 for k in FIXES}
@@ -909,10 +975,6 @@ def _kept_curve(
     return rolled[: end + 1].copy(), False, k
 
 
-#: Largest value a pymeshlab integer parameter takes (a C++ ``int``).
-_C_INT_MAX = 2**31 - 1
-#: Most remeshing iterations :func:`resample` runs (each one passes over every face).
-MAX_RESAMPLE_ITERATIONS = 100
 #: Most faces :func:`resample` may produce, predicted from the area before any
 #: remeshing. Measured here: isotropic remeshing runs 20-45k faces x iterations per
 #: second on a loaded machine, so 2 M faces x 10 iterations is already minutes, and
@@ -952,7 +1014,7 @@ def resample(
     target_edge: float,
     *,
     keep: Any = None,
-    iterations: int = 10,
+    iterations: int = RESAMPLE_ITERATIONS,
 ) -> tuple[Mesh, ResampleReport]:
     """Remesh a surface to a target edge length, keeping its boundary polylines.
 
@@ -1004,21 +1066,11 @@ def resample(
     (True, True)
     """
     m = as_mesh(mesh)
-    try:
-        target = float(target_edge)
-    except (TypeError, ValueError, OverflowError):
-        target = float("nan")
-    if not (math.isfinite(target) and target > 0):
-        raise MeshError(f"resample: target_edge={_short(target_edge)} must be a positive length")
-    if (
-        isinstance(iterations, bool)
-        or not isinstance(iterations, (int, np.integer))
-        or not 1 <= iterations <= MAX_RESAMPLE_ITERATIONS
-    ):
-        raise MeshError(
-            f"resample: iterations={_short(iterations)} must be an integer from 1 to "
-            f"{MAX_RESAMPLE_ITERATIONS} (the default 10 is enough for an even mesh)"
-        )
+    problem = resample_setting_problem(target_edge, iterations)
+    if problem is not None:
+        name, value, requirement = problem
+        raise MeshError(f"resample: {name}={_short(value)} {requirement}")
+    target = float(target_edge)
     info = diagnose(m)
     if info["problems"]["non_manifold_edges"] or info["problems"]["degenerate_faces"]:
         raise MeshError(

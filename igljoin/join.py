@@ -43,21 +43,7 @@ from .validate import check_guest_reaches_seam, check_seam_scales, check_surface
 __all__ = ["JoinSolver", "JoinResult", "SeamPair", "SolveProgress", "join"]
 
 # options that change the quadratic form (and so need a new factorization)
-_STRUCTURAL = {
-    "smooth",
-    "shape_weight",
-    "stretch_weight",
-    "smooth_weight",
-    "smooth_mode",
-    "smooth_radius",
-    "smooth_tolerance",
-    "laplacian",
-    "rotation_aware",
-    "stiffness",
-    "stiffness_on",
-    "snap_tolerance",
-    "linear_solver",
-}
+_STRUCTURAL = JoinOptions.structural_fields()
 
 _SHOWN = 5  # shared vertices listed in an error message
 

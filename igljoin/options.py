@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -23,8 +23,25 @@ WEIGHT_RANGE_WHY = (
     "only the ratios of the weights matter, and beyond 1e6 the other terms fall below "
     "float64 rounding in the solve"
 )
+#: Key of the field metadata that marks an option as structural: changing it
+#: changes the quadratic form of the global step, so
+#: :meth:`igljoin.JoinSolver.update` factors the system again. Every field says
+#: ``True`` or ``False`` (:meth:`JoinOptions.structural_fields` refuses a field
+#: that says neither), so a new option cannot be forgotten.
+STRUCTURAL = "structural"
+
 #: Largest ``max_iterations`` (a few minutes of iterations on a paper-size join).
 MAX_ITERATIONS = 1_000_000
+
+
+def _structural(default: Any) -> Any:
+    """A field whose change changes the quadratic form (a new factorization)."""
+    return field(default=default, metadata={STRUCTURAL: True})
+
+
+def _per_solve(default: Any) -> Any:
+    """A field read by the iteration only (the factorization stays)."""
+    return field(default=default, metadata={STRUCTURAL: False})
 
 
 def _short(value: Any) -> str:
@@ -110,24 +127,24 @@ class JoinOptions:
         agree to rounding.
     """
 
-    smooth: bool = True
-    shape_weight: float = 1.0
-    stretch_weight: float = 1.0
-    smooth_weight: float = 10.0
-    smooth_mode: str = "robust"
-    smooth_radius: float = 0.0
-    smooth_tolerance: float | None = None
-    laplacian: str = "uniform"
-    rotation_aware: bool = True
-    stiffness: Any = None
-    stiffness_on: str = "auto"
-    max_iterations: int = 2000
-    tolerance: float = 1e-7
-    time_limit: float | None = None
-    snap_tolerance: float = 0.1
-    initial_guess: str = "extend"
-    acceleration: int = 10
-    linear_solver: str = "auto"
+    smooth: bool = _structural(True)
+    shape_weight: float = _structural(1.0)
+    stretch_weight: float = _structural(1.0)
+    smooth_weight: float = _structural(10.0)
+    smooth_mode: str = _structural("robust")
+    smooth_radius: float = _structural(0.0)
+    smooth_tolerance: float | None = _structural(None)
+    laplacian: str = _structural("uniform")
+    rotation_aware: bool = _structural(True)
+    stiffness: Any = _structural(None)
+    stiffness_on: str = _structural("auto")
+    max_iterations: int = _per_solve(2000)
+    tolerance: float = _per_solve(1e-7)
+    time_limit: float | None = _per_solve(None)
+    snap_tolerance: float = _structural(0.1)
+    initial_guess: str = _per_solve("extend")
+    acceleration: int = _per_solve(10)
+    linear_solver: str = _structural("auto")
 
     def __post_init__(self) -> None:
         for name in ("shape_weight", "stretch_weight", "smooth_weight"):
@@ -227,8 +244,46 @@ class JoinOptions:
         object.__setattr__(self, name, value)
 
     @classmethod
+    def structural_fields(cls) -> tuple[str, ...]:
+        """Names of the options whose change needs a new factorization.
+
+        Read from the fields' metadata (``metadata={"structural": ...}``).
+
+        Returns
+        -------
+        tuple of str
+            In field order.
+
+        Raises
+        ------
+        TypeError
+            If a field does not say whether it is structural (a programming
+            error in a new option, not a user error).
+
+        Examples
+        --------
+        >>> "shape_weight" in JoinOptions.structural_fields()
+        True
+        >>> "max_iterations" in JoinOptions.structural_fields()
+        False
+        """
+        unmarked = [f.name for f in fields(cls) if STRUCTURAL not in f.metadata]
+        if unmarked:
+            raise TypeError(
+                f"JoinOptions fields {unmarked} do not say whether they are structural; "
+                "declare them with _structural(...) or _per_solve(...)"
+            )
+        return tuple(f.name for f in fields(cls) if f.metadata[STRUCTURAL])
+
+    @classmethod
     def make(cls, options: JoinOptions | dict | None = None, **overrides: Any) -> JoinOptions:
-        """Build options from an instance or mapping plus keyword overrides."""
+        """Build options from an instance or mapping plus keyword overrides.
+
+        An instance without overrides is returned as it is: it validated
+        itself when it was built and is frozen, so it is not checked again.
+        """
+        if isinstance(options, cls) and not overrides:
+            return options
         names = {f.name for f in fields(cls)}
         base = (
             {}

@@ -28,8 +28,9 @@ Nothing is lost (``docs/pipelines.md``, "Output folders"):
   batch holds the output folder's lock; a worker that dies is replaced and
   the cases it had not started run on a new pool;
 * ``resume=True`` skips a case only if its manifest, report and every output
-  still have the hashes recorded at write time and the report's input
-  hashes, effective spec and igljoin version are the current ones;
+  still have the hashes recorded at write time, the report's input
+  hashes, effective spec and igljoin version are the current ones, and the
+  guest and merged meshes exist in every format now requested;
 * the summary is kept in memory and written at the end; cases whose outcome
   could not be written anywhere are listed in :attr:`BatchSummary.unrecorded`.
 
@@ -66,8 +67,9 @@ from . import __version__
 from .atomic import atomic_write_text
 from .boundary import Curve, select_curve
 from .errors import IgljoinError, OptionsError, OutputError, SpecError, missing_extra
-from .io import WRITE_SUFFIXES, output_formats, read_mesh
+from .io import DEFAULT_OUTPUT_FORMATS, WRITE_SUFFIXES, output_formats, read_mesh
 from .join import JoinSolver
+from .options import JoinOptions
 from .outputs import (
     MANIFEST,
     STAGING_MARK,
@@ -88,6 +90,7 @@ __all__ = [
     "run_batch",
     "SolvedCase",
     "is_current",
+    "required_outputs",
     "run_case",
     "solve_case",
     "write_summary",
@@ -150,8 +153,24 @@ CASE_FILES = (
     ERROR,
     SNAPSHOT,
 )
-#: Outputs a successful case must have (``resume`` redoes a case missing one).
-REQUIRED_OUTPUTS = ("guest.ply", "merged.ply")
+
+
+def required_outputs(formats=None) -> tuple[str, ...]:
+    """Mesh files a successful case must have: guest and merged in every format.
+
+    Parameters
+    ----------
+    formats : str or iterable of str, optional
+        The requested output formats (default
+        :data:`igljoin.io.DEFAULT_OUTPUT_FORMATS`, ``("ply", "vtu")``).
+
+    Returns
+    -------
+    tuple of str
+        ``("guest.ply", "guest.vtu", "merged.ply", "merged.vtu")`` by default.
+    """
+    kinds = output_formats(DEFAULT_OUTPUT_FORMATS if formats is None else formats)
+    return tuple(f"{stem}.{fmt}" for stem in ("guest", "merged") for fmt in kinds)
 
 
 # --------------------------------------------------------------------------- one case
@@ -180,8 +199,15 @@ def _has_curve(c: Curve) -> bool:
     return any(getattr(c, k) is not None for k in ("indices", "start", "end", "via", "loop"))
 
 
-def _clean_meshes(spec: CaseSpec, host, guest, hc: Curve, gc: Curve, options: dict, extra: dict):
-    """Cleanup and resampling of a case; returns the meshes, curves and options to join."""
+def _clean_meshes(
+    spec: CaseSpec, host, guest, hc: Curve, gc: Curve, options: JoinOptions, extra: dict
+):
+    """Cleanup and resampling of a case; returns the meshes, curves and options to join.
+
+    The options are the case's own unless cleanup renumbered the guest's
+    vertices: then a per-vertex stiffness follows them (a new, validated
+    :class:`JoinOptions`; the case's options are never changed).
+    """
     from .clean import clean, resample
 
     c = spec.cleanup
@@ -200,15 +226,15 @@ def _clean_meshes(spec: CaseSpec, host, guest, hc: Curve, gc: Curve, options: di
             if role == "host":
                 host, hc = cleaned, curve
             else:
-                k = options.get("stiffness")
+                k = options.stiffness
                 if k is not None and rep.total:
-                    if len(k) != mesh.n_vertices or options.get("stiffness_on") == "face":
+                    if len(k) != mesh.n_vertices or options.stiffness_on == "face":
                         raise SpecError(
                             f"{spec.name}: a per-face stiffness cannot follow cleanup of the "
                             "guest (it changed faces); give stiffness per vertex or clean the "
                             "guest beforehand with `igljoin clean`"
                         )
-                    options = {**options, "stiffness": np.asarray(k)[rep.source]}
+                    options = options.replace(stiffness=k[rep.source])
                 guest, gc = cleaned, curve
     r = spec.resample
     if r is not None:
@@ -290,7 +316,7 @@ def solve_case(spec: CaseSpec, *, step: _Step | None = None, progress: Any = Non
     t = time.perf_counter()
     step.name = "clean"
     extra: dict[str, Any] = {}
-    hc, gc, options = spec.host_curve, spec.guest_curve, dict(spec.options)
+    hc, gc, options = spec.host_curve, spec.guest_curve, spec.options
     if spec.cleanup is not None or spec.resample is not None:
         host, guest, hc, gc, options = _clean_meshes(spec, host, guest, hc, gc, options, extra)
     timings["clean"] = time.perf_counter() - t
@@ -738,16 +764,21 @@ def _json_round_trip(data: Any) -> Any:
     return json.loads(json.dumps(data))
 
 
-def is_current(case_dir: str | os.PathLike, out: str | os.PathLike, *, snapshots=False) -> bool:
+def is_current(
+    case_dir: str | os.PathLike, out: str | os.PathLike, *, snapshots=False, formats=None
+) -> bool:
     """Whether ``out`` holds a complete output of ``case_dir`` for its current inputs.
 
     True when the folder's manifest (written when the outputs were published)
     lists ``report.json`` and every file still has the SHA-256 recorded
     there, so that the report is the one igljoin wrote; the report's input
     hashes, effective spec and igljoin version equal the current ones; the
-    outputs it lists include ``guest.ply`` and ``merged.ply`` and match the
-    manifest; and (with ``snapshots``) ``snapshot.png`` is among them.
-    Anything else, including a report that cannot be read, means "redo".
+    outputs it lists include the guest and merged mesh in every requested
+    format (:func:`required_outputs` of ``formats``: a format asked for now
+    but not written then means "redo"; files of formats no longer asked for
+    are left alone) and match the manifest; and (with ``snapshots``)
+    ``snapshot.png`` is among them. Anything else, including a report that
+    cannot be read, means "redo".
     """
     out = Path(out)
     manifest = read_manifest(out)
@@ -772,7 +803,7 @@ def is_current(case_dir: str | os.PathLike, out: str | os.PathLike, *, snapshots
     except (IgljoinError, OSError):
         return False
     outputs = report.get("outputs")
-    if not isinstance(outputs, dict) or not set(REQUIRED_OUTPUTS) <= set(outputs):
+    if not isinstance(outputs, dict) or not set(required_outputs(formats)) <= set(outputs):
         return False
     if any(manifest.get(fname) != digest for fname, digest in outputs.items()):
         return False
@@ -1111,7 +1142,7 @@ def run_batch(
         _remove_stale(out)
         todo = []
         for case in cases:
-            if resume and is_current(case, out / case.name, snapshots=snapshots):
+            if resume and is_current(case, out / case.name, snapshots=snapshots, formats=formats):
                 summary.skipped.append(case.name)
             else:
                 todo.append(case)

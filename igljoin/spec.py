@@ -42,6 +42,14 @@ from typing import Any
 import numpy as np
 
 from .boundary import Curve
+from .clean import (
+    MAX_HOLE_EDGES,
+    MIN_COMPONENT_FACES,
+    RESAMPLE_ITERATIONS,
+    SLIVER_RATIO,
+    clean_setting_problem,
+    resample_setting_problem,
+)
 from .errors import OptionsError, SpecError
 from .io import SUPPORTED_SUFFIXES
 from .options import JoinOptions
@@ -78,9 +86,27 @@ def _join_option_names() -> tuple[str, ...]:
     return tuple(f.name for f in dataclasses.fields(JoinOptions))
 
 
+def _check(problem: tuple[str, Any, str] | None, what: str) -> None:
+    if problem is not None:
+        name, value, requirement = problem
+        raise OptionsError(f"{what}: {name} = {_short(value)} {requirement}")
+
+
+def _check_switches(spec: Any, names: tuple[str, ...], what: str) -> None:
+    for name in names:
+        value = getattr(spec, name)
+        if not isinstance(value, (bool, np.bool_)):
+            raise OptionsError(f"{what}: {name} = {_short(value)} must be true or false")
+        object.__setattr__(spec, name, bool(value))
+
+
 @dataclass(frozen=True)
 class CleanupSpec:
     """Mesh repair before joining (see :func:`igljoin.clean.clean`).
+
+    The defaults are :func:`~igljoin.clean.clean`'s own, and the settings are
+    checked by the rule :func:`~igljoin.clean.clean` applies
+    (:func:`igljoin.clean.clean_setting_problem`) when the spec is built.
 
     Parameters
     ----------
@@ -89,19 +115,34 @@ class CleanupSpec:
     close_holes : bool
         Fill small holes, keeping the curve to be joined open.
     max_hole_edges : int
-        Largest hole filled, in boundary edges.
+        Largest hole filled, in boundary edges (3 to 2,147,483,647).
     sliver_ratio : float
-        Aspect ratio (``2 r / R``) below which a face is a sliver.
+        Aspect ratio (``2 r / R``) below which a face is a sliver, in [0, 1).
     min_component_faces : int
-        Loose components with fewer faces are removed.
+        Loose components with fewer faces are removed (0 keeps all).
+
+    Raises
+    ------
+    OptionsError
+        If a setting is out of range or of the wrong type.
     """
 
     host: bool = True
     guest: bool = True
     close_holes: bool = False
-    max_hole_edges: int = 30
-    sliver_ratio: float = 1e-3
-    min_component_faces: int = 10
+    max_hole_edges: int = MAX_HOLE_EDGES
+    sliver_ratio: float = SLIVER_RATIO
+    min_component_faces: int = MIN_COMPONENT_FACES
+
+    def __post_init__(self) -> None:
+        _check_switches(self, ("host", "guest", "close_holes"), "cleanup")
+        _check(
+            clean_setting_problem(self.max_hole_edges, self.sliver_ratio, self.min_component_faces),
+            "cleanup",
+        )
+        for name in ("max_hole_edges", "min_component_faces"):
+            object.__setattr__(self, name, int(getattr(self, name)))
+        object.__setattr__(self, "sliver_ratio", float(self.sliver_ratio))
 
     def clean_kwargs(self) -> dict:
         """Keyword arguments of :func:`igljoin.clean.clean`."""
@@ -117,17 +158,33 @@ class CleanupSpec:
 class ResampleSpec:
     """Guest resampling before joining (see :func:`igljoin.clean.resample`).
 
+    Checked by :func:`igljoin.clean.resample_setting_problem`, the rule
+    :func:`~igljoin.clean.resample` applies, when the spec is built.
+
     Parameters
     ----------
     target_edge : float, optional
-        Wanted guest edge length; ``None`` (default) takes the mean edge
-        length of the host curve being joined.
+        Wanted guest edge length (> 0); ``None`` (default) takes the mean
+        edge length of the host curve being joined.
     iterations : int
-        Isotropic remeshing iterations.
+        Isotropic remeshing iterations (1 to 100; the default is
+        :func:`~igljoin.clean.resample`'s).
+
+    Raises
+    ------
+    OptionsError
+        If a setting is out of range or of the wrong type.
     """
 
     target_edge: float | None = None
-    iterations: int = 10
+    iterations: int = RESAMPLE_ITERATIONS
+
+    def __post_init__(self) -> None:
+        target = 1.0 if self.target_edge is None else self.target_edge
+        _check(resample_setting_problem(target, self.iterations), "resample")
+        if self.target_edge is not None:
+            object.__setattr__(self, "target_edge", float(self.target_edge))
+        object.__setattr__(self, "iterations", int(self.iterations))
 
 
 @dataclass(frozen=True)
@@ -146,9 +203,8 @@ class CaseSpec:
         Resolved mesh files.
     host_curve, guest_curve : igljoin.Curve
         The curves to join.
-    options : dict
-        Keyword arguments of :class:`igljoin.JoinOptions` (``stiffness``
-        already loaded as an array).
+    options : igljoin.JoinOptions
+        The join options, validated (``stiffness`` loaded as an array).
     stiffness_file : pathlib.Path or None
         File the stiffness was loaded from.
     cleanup : CleanupSpec or None
@@ -164,7 +220,7 @@ class CaseSpec:
     guest: Path
     host_curve: Curve = field(default_factory=Curve)
     guest_curve: Curve = field(default_factory=Curve)
-    options: dict = field(default_factory=dict)
+    options: JoinOptions = field(default_factory=JoinOptions)
     stiffness_file: Path | None = None
     cleanup: CleanupSpec | None = None
     resample: ResampleSpec | None = None
@@ -236,9 +292,24 @@ class CaseSpec:
         _check_resample_curve(spec, where)
         return spec
 
+    def __post_init__(self) -> None:
+        for name, kind in (
+            ("options", JoinOptions),
+            ("cleanup", CleanupSpec),
+            ("resample", ResampleSpec),
+        ):
+            value = getattr(self, name)
+            if not isinstance(value, kind) and not (value is None and name != "options"):
+                raise SpecError(
+                    f"CaseSpec {name} must be a {kind.__name__}"
+                    + ("" if name == "options" else " or None")
+                    + f", got {type(value).__name__}; build the case with load_case or "
+                    "CaseSpec.make"
+                )
+
     def join_options(self) -> JoinOptions:
-        """The validated :class:`igljoin.JoinOptions` of this case."""
-        return JoinOptions.make(self.options)
+        """The validated :class:`igljoin.JoinOptions` of this case (:attr:`options`)."""
+        return self.options
 
     def input_files(self) -> dict[str, Path]:
         """Every file the case reads: ``host``, ``guest``, ``spec`` and ``stiffness``."""
@@ -277,7 +348,7 @@ class CaseSpec:
             "guest": self._shown(self.guest),
             "host_curve": _curve_json(self.host_curve),
             "guest_curve": _curve_json(self.guest_curve),
-            "options": self.join_options().to_json(),
+            "options": self.options.to_json(),
             "stiffness_file": None
             if self.stiffness_file is None
             else self._shown(self.stiffness_file),
@@ -407,7 +478,7 @@ def _uses_indices(c: Curve) -> list[str]:
 def _check_resample_curve(spec: CaseSpec, where: str) -> None:
     if spec.resample is None:
         return
-    if spec.options.get("stiffness") is not None:
+    if spec.options.stiffness is not None:
         raise SpecError(
             f"{where}: stiffness gives one value per vertex or face of the guest as read, but "
             "resample remeshes the guest; drop one of the two (resample the guest beforehand "
@@ -514,73 +585,58 @@ def _bool(value: Any, where: str, key: str) -> bool:
     return value
 
 
-def _cleanup(raw: Any, where: str) -> CleanupSpec | None:
-    table = f"{where}: [options.cleanup]"
+def _table(raw: Any, kind: type, where: str, key: str, shorthand: str) -> Mapping | None:
+    """The ``[options.KEY]`` table of a spec: ``None`` if switched off, else its settings."""
+    table = f"{where}: [options.{key}]"
+    valid = tuple(f.name for f in dataclasses.fields(kind)) + ("enabled",)
     if isinstance(raw, bool):
-        return CleanupSpec() if raw else None
-    valid = tuple(f.name for f in dataclasses.fields(CleanupSpec)) + ("enabled",)
+        return {} if raw else None
     if not isinstance(raw, Mapping):
         raise SpecError(
-            f"{where}: cleanup = {raw!r} must be true, false or a table with keys "
-            f"{', '.join(valid)}"
+            f"{where}: {key} = {_short(raw)} must be true, false{shorthand} or a table with "
+            f"keys {', '.join(valid)}"
         )
-    _unknown(raw, valid, table, "cleanup keys")
+    _unknown(raw, valid, table, f"{key} keys")
     if not _bool(raw.get("enabled", True), table, "enabled"):
         return None
-    kw: dict[str, Any] = {}
-    for key in ("host", "guest", "close_holes"):
-        if key in raw:
-            kw[key] = _bool(raw[key], table, key)
-    for key, low in (("max_hole_edges", 3), ("min_component_faces", 0)):
-        if key in raw:
-            if not _is_int(raw[key]) or raw[key] < low:
-                raise SpecError(f"{table}: {key} = {raw[key]!r} must be an integer >= {low}")
-            kw[key] = int(raw[key])
-    if "sliver_ratio" in raw:
-        r = raw["sliver_ratio"]
-        if not _is_number(r) or not 0 <= r < 1:
-            raise SpecError(f"{table}: sliver_ratio = {r!r} must be a number in [0, 1)")
-        kw["sliver_ratio"] = float(r)
-    return CleanupSpec(**kw)
+    for name, value in raw.items():
+        _big_int(value, table, name)
+    return {k: v for k, v in raw.items() if k != "enabled"}
+
+
+def _build(kind: type, settings: Mapping, where: str, key: str) -> Any:
+    try:
+        return kind(**settings)
+    except OptionsError as exc:
+        raise SpecError(f"{where}: [options.{key}] {str(exc).removeprefix(key + ': ')}") from None
+
+
+def _cleanup(raw: Any, where: str) -> CleanupSpec | None:
+    settings = _table(raw, CleanupSpec, where, "cleanup", "")
+    return None if settings is None else _build(CleanupSpec, settings, where, "cleanup")
 
 
 def _resample(raw: Any, where: str) -> ResampleSpec | None:
-    table = f"{where}: [options.resample]"
-    if isinstance(raw, bool):
-        return ResampleSpec() if raw else None
-    valid = ("enabled", "target_edge", "iterations")
     if _is_number(raw):
         raw = {"target_edge": raw}
-    if not isinstance(raw, Mapping):
-        raise SpecError(
-            f"{where}: resample = {raw!r} must be true, false, a target edge length or a table "
-            f"with keys {', '.join(valid)}"
-        )
-    _unknown(raw, valid, table, "resample keys")
-    if not _bool(raw.get("enabled", True), table, "enabled"):
+    settings = _table(raw, ResampleSpec, where, "resample", ", a target edge length")
+    if settings is None:
         return None
-    kw: dict[str, Any] = {}
-    if "target_edge" in raw:
-        t = raw["target_edge"]
-        if t == "host_curve":
-            t = None
-        elif not _is_number(t) or t <= 0:
-            raise SpecError(
-                f'{table}: target_edge = {t!r} must be a positive length or "host_curve" (the '
-                "mean edge of the host curve, the default)"
-            )
-        kw["target_edge"] = None if t is None else float(t)
-    if "iterations" in raw:
-        _big_int(raw["iterations"], table, "iterations")
-        if not _is_int(raw["iterations"]) or raw["iterations"] < 1:
-            raise SpecError(f"{table}: iterations = {raw['iterations']!r} must be an integer >= 1")
-        kw["iterations"] = int(raw["iterations"])
-    return ResampleSpec(**kw)
+    if settings.get("target_edge") == "host_curve":
+        settings = {**settings, "target_edge": None}
+    try:
+        return _build(ResampleSpec, settings, where, "resample")
+    except SpecError as exc:
+        if not str(exc).startswith(f"{where}: [options.resample] target_edge"):
+            raise
+        raise SpecError(
+            f'{exc} or "host_curve" (the mean edge of the host curve, the default)'
+        ) from None
 
 
 def parse_options(
     raw: Mapping, *, where: str, base: Path, folder: Path | None
-) -> tuple[dict, Path | None, CleanupSpec | None, ResampleSpec | None]:
+) -> tuple[JoinOptions, Path | None, CleanupSpec | None, ResampleSpec | None]:
     """Parse an ``[options]`` table.
 
     Parameters
@@ -597,8 +653,8 @@ def parse_options(
 
     Returns
     -------
-    options : dict
-        Validated JoinOptions keyword arguments.
+    options : igljoin.JoinOptions
+        The join options (validated once, here).
     stiffness_file : pathlib.Path or None
     cleanup : CleanupSpec or None
     resample : ResampleSpec or None
@@ -623,12 +679,12 @@ def parse_options(
             raise SpecError(f"{where}: stiffness must be a list of numbers or a file name")
         opts["stiffness"] = np.array(k, dtype=np.float64)
     try:
-        JoinOptions.make(opts)
+        options = JoinOptions.make(opts)
     except OptionsError as exc:
         raise SpecError(f"{where}: [options] {exc}") from None
     cleanup = _cleanup(raw["cleanup"], where) if "cleanup" in raw else None
     resample = _resample(raw["resample"], where) if "resample" in raw else None
-    return opts, stiffness_file, cleanup, resample
+    return options, stiffness_file, cleanup, resample
 
 
 def _find_mesh(folder: Path, role: str, where: str) -> Path:
@@ -700,7 +756,7 @@ def load_case(folder: str | os.PathLike) -> CaseSpec:
     Examples
     --------
     >>> spec = load_case("cases/end_to_end-equal")  # doctest: +SKIP
-    >>> spec.host_curve, spec.join_options().smooth  # doctest: +SKIP
+    >>> spec.host_curve, spec.options.smooth  # doctest: +SKIP
     (Curve(indices=None, start=None, end=None, via=None, loop=0, closed=None), True)
     """
     given = Path(folder)

@@ -8,10 +8,12 @@ examples in all); ``make fuzz`` runs the ``fuzz`` profile (many more).
 
 from __future__ import annotations
 
+import collections
 import os
 import time
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
@@ -24,6 +26,9 @@ settings.register_profile(
     "fuzz", max_examples=20_000, deadline=None, suppress_health_check=[HealthCheck.too_slow]
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+#: Examples each fuzz test of the ci/fuzz budget ran in this session (by test name).
+EXAMPLES_RUN: collections.Counter = collections.Counter()
 
 #: Seconds one call may take on these tiny meshes (a join of ~100 vertices takes
 #: ~10-50 ms; the bound catches hangs, not slowness).
@@ -112,6 +117,7 @@ def _join_checked(*args, **kw) -> None:
 
 @given(data=st.data())
 def test_random_valid_joins(data):
+    EXAMPLES_RUN["test_random_valid_joins"] += 1
     host = data.draw(sheets())
     guest = data.draw(sheets(offset=2.0))
     hc = data.draw(curves(host))
@@ -130,6 +136,7 @@ def test_random_valid_joins(data):
     curve=st.one_of(st.none(), st.integers(-1, 3), st.lists(st.integers(-1, 14), max_size=6)),
 )
 def test_random_corrupt_meshes_only_raise_documented_errors(V, F, curve):
+    EXAMPLES_RUN["test_random_corrupt_meshes_only_raise_documented_errors"] += 1
     host = grid(4, 4, np.zeros(16), np.zeros((16, 2)))
     _join_checked(host, (np.array(V, dtype=float).reshape(-1, 3), F), None, curve)
 
@@ -162,6 +169,7 @@ def test_random_corrupt_meshes_only_raise_documented_errors(V, F, curve):
     )
 )
 def test_random_option_values_only_raise_options_errors(opts):
+    EXAMPLES_RUN["test_random_option_values_only_raise_options_errors"] += 1
     try:
         igljoin.JoinOptions.make(**opts)
     except igljoin.OptionsError:
@@ -169,21 +177,61 @@ def test_random_option_values_only_raise_options_errors(opts):
 
 
 def test_ci_profile_runs_at_least_2000_examples():
-    """The issue asks for >= 2,000 fuzz examples in make test: three tests of the ci profile."""
-    assert 3 * settings.get_profile("ci").max_examples >= 2000
+    """The issue asks for >= 2,000 fuzz examples in make test: the three tests above ran them.
+
+    Counts what the three tests executed in this session (pytest runs a module's
+    tests in file order, so they ran before this one).
+    """
+    budget = (
+        "test_random_valid_joins",
+        "test_random_corrupt_meshes_only_raise_documented_errors",
+        "test_random_option_values_only_raise_options_errors",
+    )
+    missing = [name for name in budget if not EXAMPLES_RUN[name]]
+    if missing:
+        pytest.skip(f"counts the examples of {', '.join(missing)}: run the whole module")
+    assert sum(EXAMPLES_RUN[name] for name in budget) >= 2000, dict(EXAMPLES_RUN)
 
 
-@given(data=st.data())
-@settings(max_examples=60)
-def test_random_joins_weld_cleanly(data):
-    host = data.draw(sheets())
-    guest = data.draw(sheets(offset=2.0))
-    try:
-        res = igljoin.join(host, guest)
-        welded = igljoin.weld(res)
-    except igljoin.IgljoinError:
-        return
-    assert np.isfinite(welded.mesh.V).all()
+def _edge_manifold(F: np.ndarray) -> bool:
+    edges = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    _, count = np.unique(edges, axis=0, return_counts=True)
+    return bool((count <= 2).all())
+
+
+def test_random_joins_weld_cleanly():
+    """A join that succeeds welds into a finite, edge-manifold mesh whose seam vertices
+    join host and guest faces, or the weld refuses it with a WeldError; and some do weld."""
+    outcomes: collections.Counter = collections.Counter()
+
+    @given(data=st.data())
+    @settings(max_examples=60)
+    def one(data):
+        host = data.draw(sheets())
+        guest = data.draw(sheets(offset=2.0))
+        try:
+            res = igljoin.join(host, guest)
+        except igljoin.IgljoinError:
+            outcomes["join refused"] += 1
+            return
+        try:
+            welded = igljoin.weld(res)
+        except igljoin.WeldError:  # a documented refusal (zero-area or 3-face seam edges)
+            outcomes["weld refused"] += 1
+            return
+        M = welded.mesh
+        assert np.isfinite(M.V).all()
+        assert _edge_manifold(M.F)
+        for label in (0, 1):  # every seam vertex is a corner of a host and of a guest face
+            corners = np.zeros(len(M.V), dtype=bool)
+            corners[M.F[welded.label == label].ravel()] = True
+            assert corners[welded.seam].all()
+        outcomes["welded"] += 1
+
+    one()
+    # about a third of these random sheets weld (22 of 60 when measured); a tenth
+    # of the examples is far below that and still proves the welded path runs
+    assert outcomes["welded"] >= 6, dict(outcomes)
 
 
 # --------------------------------------------------------------------------- hostile inputs

@@ -219,3 +219,71 @@ def test_to_json_with_numpy_scalars():
     opt = JoinOptions(max_iterations=np.int64(10), acceleration=np.int32(2), smooth=np.bool_(True))
     back = json.loads(json.dumps(opt.to_json()))
     assert back["max_iterations"] == 10 and back["acceleration"] == 2 and back["smooth"] is True
+
+
+# --------------------------------------------------------------------------- structural options
+
+#: A valid value other than the default, per option (every option is listed:
+#: a new option fails the test below until it gets one here).
+_CHANGED = {
+    "smooth": False,
+    "shape_weight": 2.0,
+    "stretch_weight": 2.0,
+    "smooth_weight": 3.0,
+    "smooth_mode": "paper",
+    "smooth_radius": 2.0,
+    "smooth_tolerance": 5.0,
+    "laplacian": "cotangent",
+    "rotation_aware": False,
+    "stiffness": "twice",  # filled in with the guest's size below
+    "stiffness_on": "vertex",
+    "max_iterations": 9,
+    "tolerance": 1e-3,
+    "time_limit": 1e6,
+    "snap_tolerance": 0.3,
+    "initial_guess": "rigid",
+    "acceleration": 0,
+    "linear_solver": "igl",
+}
+
+
+def test_every_option_says_whether_it_is_structural():
+    for f in dataclasses.fields(JoinOptions):
+        assert isinstance(f.metadata.get("structural"), bool), f.name
+
+    @dataclasses.dataclass(frozen=True)
+    class Extended(JoinOptions):
+        new_weight: float = 1.0  # says nothing: structural_fields refuses it
+
+    with pytest.raises(TypeError, match="new_weight"):
+        Extended.structural_fields()
+
+
+def test_update_refactors_exactly_for_structural_options_and_skipping_it_is_safe():
+    """``JoinSolver.update`` rebuilds the system for the marked options only, and a
+    per-solve option changed without a rebuild solves as a fresh solver does."""
+    from igljoin import JoinSolver, phantoms
+
+    assert sorted(_CHANGED) == NAMES
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.3)
+    args = (s.host, s.guest, s.host_curve, s.guest_curve)
+    base = {"max_iterations": 25}
+    structural = set(JoinOptions.structural_fields())
+    assert structural and structural < set(NAMES)
+    for name, value in _CHANGED.items():
+        if name == "stiffness":
+            value = np.full(s.guest.n_vertices, 2.0)
+        solver = JoinSolver(*args, **base)
+        system = solver.solver
+        solver.update(**{name: value})
+        assert (solver.solver is not system) == (name in structural), name
+        if name not in structural:
+            fresh = JoinSolver(*args, **{**base, name: value}).solve()
+            # the same arithmetic in the same order: bit for bit
+            np.testing.assert_array_equal(solver.solve().guest.V, fresh.guest.V, err_msg=name)
+
+
+def test_make_does_not_validate_an_instance_again():
+    opt = JoinOptions(tolerance=1e-3)
+    assert JoinOptions.make(opt) is opt  # frozen and validated when built
+    assert JoinOptions.make(opt, tolerance=1e-4) is not opt

@@ -372,3 +372,21 @@ def test_any_executor_and_a_scheduler_address(cases, local_run, tmp_path):
         for name in ("open_strip-equal", "partial_patch-equal"):
             a, b = out / name / "report.json", reference / name / "report.json"
             assert a.read_bytes() == b.read_bytes()
+
+
+def test_resume_redoes_a_case_missing_a_newly_requested_format(cases, tmp_path):
+    work = tmp_path / "cases"
+    shutil.copytree(cases / "open_strip-equal", work / "open_strip-equal")
+    out = tmp_path / "out"
+    first = run_batch(work, out, workers=0, progress=False, formats="ply")
+    assert first.ran == ["open_strip-equal"]
+    case_out = out / "open_strip-equal"
+    assert not (case_out / "guest.vtu").exists()
+    assert not is_current(work / "open_strip-equal", case_out, formats="ply,vtu")
+    summary = run_batch(work, out, resume=True, workers=0, progress=False, formats="ply,vtu")
+    assert summary.ran == ["open_strip-equal"]
+    assert (case_out / "guest.vtu").is_file() and (case_out / "merged.vtu").is_file()
+    # every requested format present: skipped, also when fewer are asked for
+    for formats in ("ply,vtu", "ply", "vtu"):
+        summary = run_batch(work, out, resume=True, workers=0, progress=False, formats=formats)
+        assert summary.skipped == ["open_strip-equal"], formats

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 import shutil
@@ -41,8 +42,8 @@ def test_the_documented_examples_load(tmp_path, sample):
     assert spec.name == "case" and spec.host == folder.resolve() / "host.ply"
     assert spec.host_curve == igljoin.Curve(loop=0)
     np.testing.assert_array_equal(spec.guest_curve.start, [21.5, 0.25, 3.0])
-    assert spec.options["smooth_weight"] == 10.0
-    np.testing.assert_array_equal(spec.options["stiffness"], 2.0)
+    assert spec.options.smooth_weight == 10.0
+    np.testing.assert_array_equal(spec.options.stiffness, 2.0)
     assert spec.stiffness_file == folder.resolve() / "stiffness.npy"
     assert spec.join_options().stiffness_on == "vertex"
     assert spec.cleanup.close_holes and spec.cleanup.max_hole_edges == 30
@@ -193,7 +194,7 @@ def test_stiffness_text_files(tmp_path, sample):
     folder = make_case(tmp_path, sample, '[options]\nstiffness = "k.csv"\n')
     k = np.linspace(1, 2, sample.guest.n_vertices)
     np.savetxt(folder / "k.csv", k[None], delimiter=",", fmt="%.17g")
-    np.testing.assert_array_equal(load_case(folder).options["stiffness"], k)
+    np.testing.assert_array_equal(load_case(folder).options.stiffness, k)
     (folder / "k.csv").write_text("1,2,oops\n")
     with pytest.raises(igljoin.SpecError, match="cannot read the stiffness file k.csv"):
         load_case(folder)
@@ -243,3 +244,68 @@ def test_case_from_arguments(tmp_path, sample):
     assert spec.host_curve.loop == 0 and spec.cleanup.close_holes
     with pytest.raises(igljoin.SpecError, match="unknown options 'bogus'"):
         CaseSpec.make(folder / "host.ply", folder / "guest.obj", options={"bogus": 1})
+
+
+# --------------------------------------------------------------------------- options as objects
+
+
+def test_case_holds_validated_option_objects(tmp_path, sample):
+    toml = (
+        "[options]\nsmooth_weight = 4.0\n[options.cleanup]\nclose_holes = true\n"
+        "[options.resample]\niterations = 3\n"
+    )
+    spec = load_case(make_case(tmp_path, sample, toml))
+    assert isinstance(spec.options, igljoin.JoinOptions) and spec.options.smooth_weight == 4.0
+    assert spec.join_options() is spec.options
+    assert spec.cleanup == igljoin.spec.CleanupSpec(close_holes=True)
+    assert spec.resample == igljoin.spec.ResampleSpec(iterations=3)
+    with pytest.raises(igljoin.SpecError, match="options must be a JoinOptions"):
+        dataclasses.replace(spec, options={"smooth_weight": 4.0})
+
+
+def test_cleanup_and_resample_defaults_are_the_functions_own():
+    import inspect
+
+    from igljoin.clean import clean, resample
+
+    spec = igljoin.spec
+    for kind, function in ((spec.CleanupSpec, clean), (spec.ResampleSpec, resample)):
+        defaults = {
+            name: p.default
+            for name, p in inspect.signature(function).parameters.items()
+            if p.default is not inspect.Parameter.empty
+        }
+        for f in dataclasses.fields(kind):
+            if f.name in defaults:
+                assert f.default == defaults[f.name], f.name
+
+
+@pytest.mark.parametrize(
+    "kind, settings, match",
+    [
+        ("CleanupSpec", {"max_hole_edges": 2}, r"max_hole_edges = 2 must be an integer from 3"),
+        ("CleanupSpec", {"sliver_ratio": 1.0}, r"sliver_ratio = 1.0 must be a number in \[0, 1\)"),
+        ("CleanupSpec", {"min_component_faces": -1}, r"min_component_faces = -1 must be"),
+        ("CleanupSpec", {"host": "yes"}, r"host = 'yes' must be true or false"),
+        ("ResampleSpec", {"iterations": 500}, r"iterations = 500 must be an integer from 1 to 100"),
+        ("ResampleSpec", {"target_edge": "1.5"}, r"target_edge = '1.5' must be a positive length"),
+        ("ResampleSpec", {"target_edge": float("nan")}, r"target_edge = nan must be a positive"),
+    ],
+)
+def test_cleanup_and_resample_specs_validate_themselves(kind, settings, match):
+    with pytest.raises(igljoin.OptionsError, match=match):
+        getattr(igljoin.spec, kind)(**settings)
+
+
+@pytest.mark.parametrize(
+    "toml, match",
+    [
+        ("[options.cleanup]\nmax_hole_edges = 2.5\n", r"\[options.cleanup\] max_hole_edges = 2.5"),
+        ("[options.resample]\niterations = 500\n", r"\[options.resample\] iterations = 500"),
+        ("[options.resample]\ntarget_edge = 'x'\n", r"positive length or \"host_curve\""),
+    ],
+)
+def test_spec_reports_the_objects_checks_with_the_file(tmp_path, sample, toml, match):
+    with pytest.raises(igljoin.SpecError, match=match) as info:
+        load_case(make_case(tmp_path, sample, toml))
+    assert "join.toml" in str(info.value)
