@@ -10,7 +10,6 @@ import subprocess
 import sys
 import threading
 import time
-import uuid
 from pathlib import Path
 
 import pytest
@@ -20,6 +19,7 @@ from igljoin import phantoms
 from igljoin.pipeline import SolvedCase, _Step, _write_outputs, run_batch
 
 from .test_pipeline import assert_same_outputs, file_hashes, hidden
+from .tmpfs import small_tmpfs
 
 IGLJOIN = Path(sys.executable).parent / "igljoin"
 SLOW = 4  # cases of ~0.5 s each (1,500 iterations, capped): a kill lands while workers are busy
@@ -210,21 +210,8 @@ def test_a_failed_save_fails_the_case(tmp_path):
 @pytest.fixture
 def full_disk():
     """A 192 KiB tmpfs: writes beyond that fail with ENOSPC like a full disk."""
-    if os.geteuid() != 0 or shutil.which("mount") is None:
-        pytest.skip("mounting a small tmpfs needs root")
-    mnt = Path("/tmp") / f"igljoin-full-{uuid.uuid4().hex[:8]}"
-    mnt.mkdir()
-    ok = subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", "size=192k", "tmpfs", str(mnt)], capture_output=True
-    )
-    if ok.returncode != 0:
-        mnt.rmdir()
-        pytest.skip(f"cannot mount a tmpfs here: {ok.stderr.decode().strip()}")
-    try:
+    with small_tmpfs(192) as mnt:
         yield mnt
-    finally:
-        subprocess.run(["umount", str(mnt)], check=False)
-        mnt.rmdir()
 
 
 def test_full_disk_mid_batch_records_every_case_or_names_it(full_disk, tmp_path):

@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import errno
 import json
-import os
 import shutil
 import subprocess
 import sys
-import uuid
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +19,7 @@ from igljoin import phantoms
 
 from .cli_run import call
 from .cuts import sample_mesh_dir
+from .tmpfs import small_tmpfs
 
 BIN = Path(sys.executable).parent
 IGLJOIN = shutil.which("igljoin", path=str(BIN))
@@ -101,21 +100,8 @@ def test_cli_join_on_random_files_never_crashes(tmp_path_factory, V, F, flags):
 @pytest.fixture
 def full_disk():
     """A 256 KiB tmpfs: writes beyond that fail with ENOSPC like a full disk."""
-    if os.geteuid() != 0 or shutil.which("mount") is None:
-        pytest.skip("mounting a small tmpfs needs root")
-    mnt = Path("/tmp") / f"igljoin-full-{uuid.uuid4().hex[:8]}"
-    mnt.mkdir()
-    ok = subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mnt)], capture_output=True
-    )
-    if ok.returncode != 0:
-        mnt.rmdir()
-        pytest.skip(f"cannot mount a tmpfs here: {ok.stderr.decode().strip()}")
-    try:
+    with small_tmpfs(256) as mnt:
         yield mnt
-    finally:
-        subprocess.run(["umount", str(mnt)], check=False)
-        mnt.rmdir()
 
 
 def test_full_disk_gives_a_clear_error_and_no_partial_file(full_disk):
