@@ -55,8 +55,8 @@ def slow_reference(slow_cases, tmp_path_factory) -> Path:
     return out
 
 
-def _session_processes(sid: int) -> list[tuple[int, str]]:
-    """(pid, command) of every live process of session ``sid`` (from /proc)."""
+def _processes() -> list[tuple[int, list[str], str]]:
+    """(pid, stat fields after the command name, command line) of every live process (/proc)."""
     found = []
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
@@ -66,26 +66,18 @@ def _session_processes(sid: int) -> list[tuple[int, str]]:
             cmd = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
         except OSError:
             continue
-        fields = stat.rsplit(")", 1)[1].split()
-        state, session = fields[0], int(fields[3])
-        if session == sid and state != "Z":
-            found.append((int(entry.name), cmd))
+        found.append((int(entry.name), stat.rsplit(")", 1)[1].split(), cmd))
     return found
 
 
-def _children(pid: int) -> list[tuple[int, str]]:
-    kids = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            stat = (entry / "stat").read_text()
-            cmd = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-        except OSError:
-            continue
-        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
-            kids.append((int(entry.name), cmd))
-    return kids
+def _session_processes(sid: int) -> list[tuple[int, str]]:
+    """(pid, command) of every live process of session ``sid``."""
+    return [(pid, cmd) for pid, f, cmd in _processes() if int(f[3]) == sid and f[0] != "Z"]
+
+
+def _children(parent: int) -> list[tuple[int, str]]:
+    """(pid, command) of every child of ``parent``."""
+    return [(pid, cmd) for pid, f, cmd in _processes() if int(f[1]) == parent]
 
 
 def _wait_for(predicate, seconds: float) -> bool:
