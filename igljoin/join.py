@@ -21,7 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from . import metrics
+from . import crease, metrics
+from .bandfit import band_fit
 from .boundary import Curve, SelectedCurve, boundary_loops, select_curve
 from .correspond import Correspondence, correspond, pair_seams, rigid_fit
 from .errors import CurveError, MeshError, OptionsError
@@ -47,6 +48,15 @@ _STRUCTURAL = JoinOptions.structural_fields()
 
 _SHOWN = 5  # shared vertices listed in an error message
 
+
+
+#: A crease within this many standard errors of zero (``noise``) is not told from
+#: the scan noise of the surfaces: the band smooth join leaves it (two: about 95 %).
+CREASE_NOISE_SIGMAS = 2.0
+
+#: Largest automatic band tolerance, degrees: noisier bands than this are a poor fit
+#: (a real feature inside the band), not noise to be left alone.
+MAX_NOISE_TOLERANCE = 10.0
 
 
 def _interpolate_frames(frames: SeamFrames, edge: np.ndarray, t: np.ndarray, closed: bool):
@@ -601,7 +611,36 @@ class JoinSolver:
             k = edge_stiffness(self.E, c.F, *self._stiffness())
             terms.append(StretchTerm(c.V, self.E, opt.stretch_weight * k))
         self.smooth_tolerances_deg = []
-        if opt.smooth and opt.smooth_weight > 0:
+        self.bands = [
+            opt.smooth_band
+            or crease.default_band(
+                self.host.V, self.host.F, p.host_curve.indices, c.V, c.F, part.seam
+            )
+            for p, part in zip(self.pairs, parts)
+        ]
+        if opt.smooth and opt.smooth_weight > 0 and opt.smooth_mode == "band":
+            for p, part, band in zip(self.pairs, parts, self.bands):
+                hc = p.host_curve
+                host_fit = band_fit(self.host.V, self.host.F, hc.indices, hc.closed, band)
+                at_seam = _interpolate_frames(
+                    host_fit.frames, part.host_edge, part.host_edge_t, hc.closed
+                )
+                guest_fit = band_fit(c.V, c.F, part.seam, hc.closed, band)
+                tolerance = self._band_tolerance(host_fit, guest_fit, part, hc.closed)
+                self.smooth_tolerances_deg.append(float(np.median(tolerance)))
+                terms.append(
+                    SmoothJoinTerm(
+                        c.V,
+                        c.F,
+                        part.seam,
+                        at_seam,
+                        opt.smooth_weight,
+                        "band",
+                        np.radians(tolerance),
+                        fit=guest_fit,
+                    )
+                )
+        elif opt.smooth and opt.smooth_weight > 0:
             for p, part, mean_edge in zip(self.pairs, parts, self.host_mean_edges):
                 hc = p.host_curve
                 radius = None if opt.smooth_mode == "paper" else opt.smooth_radius * mean_edge
@@ -627,6 +666,24 @@ class JoinSolver:
         self.solver = LocalGlobalSolver(terms, len(c.V), c.seam, opt.linear_solver)
         self.factorizations += 1
         self.timings.update(correspond=t1 - t0, terms=t2 - t1, factor=self.solver.factor_seconds)
+
+    def _band_tolerance(self, host_fit, guest_fit, part, closed: bool) -> np.ndarray:
+        """Crease (degrees) the band smooth join leaves alone at each seam vertex.
+
+        ``smooth_tolerance`` if given; else :data:`CREASE_NOISE_SIGMAS` standard
+        errors of the crease measured there (from the residuals of the host's and
+        the rest guest's band fits): a crease the band cannot tell from scan noise
+        is not chased, so a piece that already joins smoothly is not moved.
+        """
+        if self.options.smooth_tolerance is not None:
+            return np.full(len(part.seam), float(self.options.smooth_tolerance))
+        host_se = host_fit.slope_error
+        k = len(host_se)
+        edge, t = part.host_edge, part.host_edge_t
+        nxt = (edge + 1) % k if closed else np.minimum(edge + 1, k - 1)
+        at_seam = host_se[edge] * (1.0 - t) + host_se[nxt] * t
+        se = np.hypot(at_seam, guest_fit.slope_error)
+        return np.degrees(np.minimum(CREASE_NOISE_SIGMAS * se, np.radians(MAX_NOISE_TOLERANCE)))
 
     def _smooth_tolerance(self, smoothed: SeamFrames, hc: SelectedCurve) -> float:
         """Crease (degrees) the robust smooth join tolerates: the host's own normal noise.
@@ -889,12 +946,20 @@ class JoinSolver:
         rest = Mesh(c.V, c.F, name="rest guest")
         seams, per_seam, gaps = [], [], []
         start = 0
-        for p, part in zip(self.pairs, self.parts):
+        onering_all, input_all, noise_all = [], [], []
+        for p, part, band in zip(self.pairs, self.parts, self.bands):
             hc = p.host_curve
             s = len(part.seam)
-            crease = metrics.crease_angles(
-                host.V, host.F, hc.indices, X, c.F, part.seam[part.host_hit], hc.closed
-            )
+            at_host = part.seam[part.host_hit]
+            measured = crease.seam_crease(host.V, host.F, hc.indices, X, c.F, at_host, hc.closed, band)
+            seam_crease = measured.angles
+            noise_all.append(measured.noise)
+            onering = metrics.crease_angles(host.V, host.F, hc.indices, X, c.F, at_host, hc.closed)
+            inputs = crease.input_crease(
+                host.V, host.F, hc.indices, c.V, c.F, at_host, hc.closed, band
+            ).angles
+            onering_all.append(onering)
+            input_all.append(inputs)
             gap = metrics.seam_gap(X[part.seam], host.V[hc.indices], hc.closed)
             gaps.append(gap)
             dihedral = metrics.host_dihedral_angles(host.V, host.F, hc.indices)
@@ -909,7 +974,7 @@ class JoinSolver:
                     host_edge=part.host_edge.copy(),
                     host_edge_t=part.host_edge_t.copy(),
                     inserted=len(part.inserted_t),
-                    crease=crease,
+                    crease=seam_crease,
                     pairing=dict(p.pairing),
                 )
             )
@@ -921,7 +986,13 @@ class JoinSolver:
                     "host_curve": len(hc.indices),
                     "inserted": len(part.inserted_t),
                     "seam_gap": gap,
-                    "crease_deg": metrics.summary(crease),
+                    "crease_deg": {
+                        **metrics.summary(seam_crease),
+                        "band": band,
+                        "noise": float(np.median(measured.noise)),
+                    },
+                    "crease_onering_deg": metrics.summary(onering),
+                    "input_crease_deg": {**metrics.summary(inputs), "band": band},
                     "host_dihedral_deg": {
                         **metrics.summary(dihedral),
                         "rings": metrics.HOST_DIHEDRAL_RINGS,
@@ -930,7 +1001,7 @@ class JoinSolver:
             )
             start += s
         host_curve = np.concatenate([sm.host_curve for sm in seams])
-        crease = np.concatenate([sm.crease for sm in seams])
+        seam_creases = np.concatenate([sm.crease for sm in seams])
         host_dihedral = metrics.host_dihedral_angles(host.V, host.F, host_curve)
         rows = sum(t.soft_rows for t in self.terms)
         counts = {
@@ -949,7 +1020,16 @@ class JoinSolver:
         )
         m = {
             "seam_gap": _combined_gap(gaps, [len(sm.seam) for sm in seams]),
-            "crease_deg": {**metrics.summary(crease)},
+            "crease_deg": {
+                **metrics.summary(seam_creases),
+                "band": max(self.bands),
+                "noise": float(np.median(np.concatenate(noise_all))),
+            },
+            "crease_onering_deg": metrics.summary(np.concatenate(onering_all)),
+            "input_crease_deg": {
+                **metrics.summary(np.concatenate(input_all)),
+                "band": max(self.bands),
+            },
             "host_dihedral_deg": {
                 **metrics.summary(host_dihedral),
                 "rings": metrics.HOST_DIHEDRAL_RINGS,
@@ -978,7 +1058,7 @@ class JoinSolver:
             timings={},
             options=self.options,
             correspondence=c,
-            crease=crease,
+            crease=seam_creases,
             metrics=m,
             stop_reason=run.reason,
             pairing=dict(self.pairing),

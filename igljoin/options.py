@@ -67,11 +67,19 @@ class JoinOptions:
         ``w_J``, weight of the smooth-join term (Eq. 7). Each of the three
         weights is 0 or at most :data:`MAX_WEIGHT` (1e6): only their ratios
         matter, and beyond that the other terms fall below float64 rounding.
-    smooth_mode : {"robust", "paper"}
-        ``"paper"`` pulls one tangential point per seam vertex to a fixed
-        target (Eq. 7 literally); ``"robust"`` (default) pulls every
-        cross-seam edge into the host's tangent plane continued across the
-        seam, re-projecting the current edge at each iteration.
+    smooth_mode : {"band", "robust", "paper"}
+        ``"band"`` (default) pulls the direction in which the guest leaves
+        each seam vertex, fitted over a band of width ``smooth_band``
+        (:mod:`igljoin.bandfit`), into the host's tangent half-plane
+        continued across the seam, fitted over the same band: slivers,
+        very short seam edges and zig-zag seams change neither.
+        ``"robust"`` pulls every one-ring cross-seam edge into the host's
+        tangent plane; ``"paper"`` pulls one tangential point per seam
+        vertex to a fixed target (Eq. 7 literally).
+    smooth_band : float, optional
+        Band width in mesh units for ``smooth_mode="band"`` and for the
+        crease measure. ``None`` (default): 3 median edge lengths of the
+        coarser side near the seam (:func:`igljoin.crease.default_band`).
     smooth_radius : float
         Host tangent planes: 0 (default) takes them from the faces at each
         host curve vertex, as the paper does; a positive value fits a
@@ -131,7 +139,8 @@ class JoinOptions:
     shape_weight: float = _structural(1.0)
     stretch_weight: float = _structural(1.0)
     smooth_weight: float = _structural(10.0)
-    smooth_mode: str = _structural("robust")
+    smooth_mode: str = _structural("band")
+    smooth_band: float | None = _structural(None)
     smooth_radius: float = _structural(0.0)
     smooth_tolerance: float | None = _structural(None)
     laplacian: str = _structural("uniform")
@@ -162,6 +171,8 @@ class JoinOptions:
                 f"snap_tolerance={self.snap_tolerance} must be below 0.5 (a fraction of a guest "
                 "edge); try the default 0.1"
             )
+        if self.smooth_band is not None:
+            self._number("smooth_band", low=0.0, strict=True)
         if self.smooth_tolerance is not None:
             self._number("smooth_tolerance", low=0.0)
             if self.smooth_tolerance >= 90.0:
@@ -185,7 +196,7 @@ class JoinOptions:
                 "(the default is 2000)"
             )
         for name, allowed in (
-            ("smooth_mode", ("robust", "paper")),
+            ("smooth_mode", ("band", "robust", "paper")),
             ("laplacian", ("uniform", "cotangent")),
             ("stiffness_on", ("auto", "vertex", "face")),
             ("initial_guess", ("extend", "rigid")),

@@ -24,12 +24,17 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import kernels
+from .bandfit import BAND_EDGES
 from .frames import SeamFrames, face_normals_areas, unit, vertex_face_matrix
 from .rotations import fit_rotations, fit_rotations_igl
 
 #: Weight ``μ`` of the one-ring edges in the rotation-aware shape term, relative to
 #: the Laplacian. Small: it only fixes the rotations and makes them exact minimisers.
 ROTATION_REGULARISATION = 0.1
+
+#: Weight of one band row of the smooth-join term in cross-seam edges of the robust
+#: form: a seam vertex of a regular mesh has about two to three such edges.
+ROWS_PER_BAND_ROW = 2.5
 
 __all__ = [
     "Term",
@@ -529,7 +534,11 @@ class SmoothJoinTerm(Term):
         Host frames interpolated at each seam vertex's target, shape (s, 3) each.
     weight : float
         ``w_J``.
-    mode : {"robust", "paper"}
+    mode : {"band", "robust", "paper"}
+        ``"band"``: one row per seam vertex, the guest's direction off the
+        seam fitted over a band (``fit``), pulled into the half-plane that
+        continues the host (``frames``, fitted over the same band) — slivers,
+        very short seam edges and zig-zag seams change neither side.
         ``"paper"``: for each seam vertex ``b`` its tangential point ``b_t``
         (the neighbour most parallel to ``n(b) × (b − b₁)``) is pulled to
         ``b′ + w`` with ``w`` the host's outward cross-seam direction at the
@@ -539,17 +548,27 @@ class SmoothJoinTerm(Term):
         on the side away from the host); the target is the projection of the
         current edge onto that half-plane, so no single noisy neighbour or
         length dictates the result.
-    tolerance : float
-        Robust mode: half-angle in radians of a wedge around the half-plane
-        within which an edge is left alone (0: exact tangent continuity). It
-        keeps the join from flattening what is only noise of the host.
+    tolerance : float or ndarray, shape (s,)
+        Robust and band modes: half-angle in radians of a wedge around the
+        half-plane within which an edge (a band row) is left alone (0: exact
+        tangent continuity). It keeps the join from flattening what is only
+        noise of the host. Band mode takes one angle per seam vertex.
+    fit : BandFit, optional
+        Band mode: the rest guest's band fit along ``seam``
+        (:func:`igljoin.bandfit.band_fit`); its rows become ``K``.
     """
 
     name = "smooth"
 
-    def __init__(self, V0, F, seam, frames: SeamFrames, weight=1.0, mode="robust", tolerance=0.0):
+    def __init__(
+        self, V0, F, seam, frames: SeamFrames, weight=1.0, mode="robust", tolerance=0.0, fit=None
+    ):
         n = len(V0)
         self.mode = mode
+        if mode == "band":
+            self.tolerance = np.broadcast_to(np.asarray(tolerance, dtype=np.float64), len(seam))
+            self._init_band(n, frames, weight, fit)
+            return
         self.tolerance = float(tolerance)
         on_seam = np.zeros(n, dtype=bool)
         on_seam[seam] = True
@@ -583,6 +602,23 @@ class SmoothJoinTerm(Term):
             self._fixed_c = (
                 np.ascontiguousarray(self.fixed_target) if mode == "paper" else np.zeros((0, 3))
             )
+
+    def _init_band(self, n: int, frames: SeamFrames, weight: float, fit) -> None:
+        """One row per seam vertex: the guest's band-fitted direction off the seam."""
+        if fit is None:
+            raise ValueError("mode='band' needs the guest's band fit (fit=BandFit)")
+        # c = ∂X/∂v is a unit-free direction; scaled by the band's edge length so that a
+        # row weighs like one cross-seam edge of the robust form
+        scale = fit.band / BAND_EDGES
+        self.K = sp.csr_matrix(fit.weights * scale)
+        if self.K.shape[1] != n:
+            raise ValueError("the band fit is of another mesh")
+        self.pairs = None
+        self.normal = np.ascontiguousarray(frames.normal, dtype=np.float64)
+        self.outward = np.ascontiguousarray(-frames.inward, dtype=np.float64)
+        self.weights = np.full(self.K.shape[0], float(weight) * ROWS_PER_BAND_ROW)
+        self.preconditioner_scale = 0.5
+        self.compiled = False
 
     def local(self, state: LocalState) -> tuple[float, np.ndarray]:
         """Energy and half gradient (see :meth:`Term.local`), compiled when available."""
@@ -624,13 +660,14 @@ class SmoothJoinTerm(Term):
         out = self.outward
         p = p - np.minimum(np.einsum("ij,ij->i", p, out), 0.0)[:, None] * out
         plen = np.linalg.norm(p, axis=1)
-        if self.tolerance == 0.0:
+        tol = self.tolerance
+        if not np.any(tol):
             return p
         # project (plen, z) onto the wedge |z| <= tan(alpha) plen: keep d if inside,
-        # else the closest point on the wedge's face
-        ca, sa = np.cos(self.tolerance), np.sin(self.tolerance)
-        inside = np.abs(z) <= np.tan(self.tolerance) * plen
+        # else the closest point on the wedge's face (alpha: one angle, or one per row)
+        ca, sa = np.cos(tol), np.sin(tol)
+        inside = np.abs(z) <= np.tan(tol) * plen
         s = np.maximum(plen * ca + np.abs(z) * sa, 0.0)
         u = p / np.where(plen > 0, plen, 1.0)[:, None]
-        face = s[:, None] * (ca * u + (sa * np.sign(z))[:, None] * n)
+        face = s[:, None] * (np.reshape(ca, (-1, 1)) * u + (sa * np.sign(z))[:, None] * n)
         return np.where(inside[:, None], p + z[:, None] * n, face)

@@ -1,0 +1,296 @@
+"""The surface beside a boundary curve, fitted over a band of stated width.
+
+At each vertex ``q`` of a boundary curve the surface on its one side is
+fitted, over the vertices within ``band`` of ``q``, as a quadratic map
+``X(u, v) ≈ q + a u + c v + ½(A u² + 2B uv + C v²)`` of the local coordinates
+``u`` (along the curve) and ``v`` (into the surface). The fit's derivative
+``c = ∂X/∂v`` at ``q`` is the direction in which the surface leaves the curve,
+measured at the scale of the band rather than of the triangles at ``q``:
+a sliver, a very short curve edge or a zig-zag curve changes it little,
+because it is a least-squares fit over every vertex of the band.
+
+Because the local coordinates are fixed (taken from one configuration),
+``c`` is a *linear* function of the vertex positions: :func:`band_fit`
+returns that function as a sparse matrix, so the same fit measures a crease
+(:mod:`igljoin.crease`) and, applied to the unknown positions, gives the
+smooth-join term its rows (:class:`igljoin.terms.SmoothJoinTerm`, mode
+``"band"``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .frames import SeamFrames, face_normals_areas, unit, vertex_face_matrix
+
+__all__ = ["BandFit", "band_fit", "curve_tangents", "median_edge_near", "BAND_EDGES"]
+
+#: Default band width, in median edge lengths of the surfaces near the curve: wide
+#: enough that the fit sees two to three rings of ordinary triangles beyond any sliver
+#: row at the curve, narrow enough to stay local on the paper's tubes.
+BAND_EDGES = 3.0
+
+#: A band vertex whose normal turns more than about 70° from the curve vertex's
+#: normal is on another sheet of the surface (the far side of a thin wall or wing).
+_SAME_SHEET_COS = 0.35
+
+#: Fewer band vertices than this and the quadratic terms are dropped (plane fit).
+_QUADRATIC_MIN = 8
+
+
+@dataclass(frozen=True)
+class BandFit:
+    """A band fit along one curve.
+
+    Attributes
+    ----------
+    weights : scipy.sparse.csr_matrix, shape (k, n)
+        ``weights @ X`` is the fitted cross-curve derivative ``c`` (k, 3) at each
+        curve vertex for any positions ``X`` (n, 3) of the same mesh (the local
+        coordinates are those of the configuration fitted).
+    frames : SeamFrames
+        Of the configuration fitted: the fit's unit normal (sign of the face
+        orientation), the curve tangent over the band, and the unit direction
+        into the surface (``c`` without its component along the tangent).
+    band : float
+        Band width in mesh units.
+    counts : ndarray of int64, shape (k,)
+        Band vertices used at each curve vertex.
+    slope_error : ndarray, shape (k,)
+        Standard error of the fitted slope off the curve (radians for small
+        angles), from the residuals of the fit: how finely the band can
+        resolve a crease there (0 where the band has too few vertices to say).
+    """
+
+    weights: sp.csr_matrix
+    frames: SeamFrames
+    band: float
+    counts: np.ndarray
+    slope_error: np.ndarray
+
+
+def curve_tangents(P: np.ndarray, closed: bool, span: float) -> np.ndarray:
+    """Unit tangents of a polyline, each the chord over an arc length ``span`` centred on it.
+
+    Parameters
+    ----------
+    P : ndarray, shape (k, 3)
+    closed : bool
+    span : float
+        Arc length of the chord; capped at half a closed curve's length.
+
+    Returns
+    -------
+    ndarray, shape (k, 3)
+    """
+    P = np.asarray(P, dtype=np.float64)
+    k = len(P)
+    Q = np.vstack([P, P[:1]]) if closed else P
+    seg = np.linalg.norm(np.diff(Q, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    length = float(s[-1])
+    if length <= 0:
+        return np.zeros((k, 3))
+    half = 0.5 * min(float(span), 0.5 * length if closed else length)
+    si = s[:k]
+    if closed:
+        # unroll one period each side so that the chord may cross the start
+        S = np.concatenate([s[:-1] - length, s[:-1], s[:-1] + length, [2 * length]])
+        R = np.vstack([P, P, P, P[:1]])
+        lo, hi = si - half, si + half
+    else:
+        S, R = s, P
+        lo, hi = np.maximum(si - half, 0.0), np.minimum(si + half, length)
+
+    def at(t):
+        return np.stack([np.interp(t, S, R[:, j]) for j in range(3)], axis=1)
+
+    return unit(at(hi) - at(lo))
+
+
+def median_edge_near(V: np.ndarray, F: np.ndarray, curve: np.ndarray, rings: int = 2) -> float:
+    """Median length of the edges of the faces within ``rings`` rings of a curve.
+
+    Parameters
+    ----------
+    V : ndarray, shape (n, 3)
+    F : ndarray of int64, shape (m, 3)
+    curve : ndarray of int64, shape (k,)
+    rings : int
+
+    Returns
+    -------
+    float
+        0 for a mesh without faces near the curve.
+    """
+    F = np.asarray(F, dtype=np.int64)
+    mark = np.zeros(len(V), dtype=bool)
+    mark[np.asarray(curve, dtype=np.int64)] = True
+    band = mark[F].any(axis=1)
+    for _ in range(rings - 1):
+        mark[F[band].reshape(-1)] = True
+        band = mark[F].any(axis=1)
+    G = F[band]
+    if not len(G):
+        return 0.0
+    L = np.linalg.norm(V[G] - V[np.roll(G, -1, axis=1)], axis=2)
+    return float(np.median(L))
+
+
+def _near_vertices(V: np.ndarray, F: np.ndarray, curve: np.ndarray, limit: float) -> np.ndarray:
+    """Vertices within edge-path distance ``limit`` of the curve (the curve included)."""
+    from scipy.sparse.csgraph import dijkstra
+
+    n = len(V)
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    w = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+    # a zero-length edge would vanish from the sparse graph; keep it connected
+    w = np.maximum(w, 1e-300)
+    G = sp.csr_matrix((w, (E[:, 0], E[:, 1])), shape=(n, n))
+    d = dijkstra(G, directed=False, indices=np.unique(curve), min_only=True, limit=limit)
+    return np.flatnonzero(np.isfinite(d))
+
+
+def band_fit(
+    V: np.ndarray,
+    F: np.ndarray,
+    curve: np.ndarray,
+    closed: bool,
+    band: float,
+    *,
+    curve_points: np.ndarray | None = None,
+    inner: float = 0.0,
+) -> BandFit:
+    """Fit the surface beside a boundary curve over a band, at each curve vertex.
+
+    Parameters
+    ----------
+    V : ndarray, shape (n, 3)
+    F : ndarray of int64, shape (m, 3)
+    curve : ndarray of int64, shape (k,)
+        Ordered boundary vertices (the fits' anchors).
+    closed : bool
+    band : float
+        Band width (> 0), in mesh units: the vertices within this distance of a
+        curve vertex (and on the same sheet of the surface) enter its fit.
+    curve_points : ndarray, shape (k, 3), optional
+        Positions that give the curve tangents (default ``V[curve]``), e.g. the
+        host curve when fitting a guest that lies on it.
+    inner : float
+        Leave out the vertices nearer than this to the curve vertex (a shell
+        ``inner ≤ d ≤ band``); the fit is still taken at the curve vertex.
+
+    Returns
+    -------
+    BandFit
+    """
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64)
+    curve = np.asarray(curve, dtype=np.int64)
+    band = float(band)
+    n, k = len(V), len(curve)
+    A = V[curve]
+    P = A if curve_points is None else np.asarray(curve_points, dtype=np.float64)
+    T = curve_tangents(P, closed, band)
+    # only faces near the curve can enter a fit (a large host costs little)
+    reach = 2.0 * band
+    box = ((V >= A.min(axis=0) - reach) & (V <= A.max(axis=0) + reach)).all(axis=1)
+    F = F[box[F].all(axis=1)]
+    normals, areas = face_normals_areas(V, F)
+    VN = unit(vertex_face_matrix(F, n) @ (normals * areas[:, None]))
+    near = _near_vertices(V, F, curve, reach)
+    from scipy.spatial import cKDTree  # here: scipy.spatial costs start-up time
+
+    hits = cKDTree(V[near]).query_ball_point(A, band)
+    counts = np.fromiter((len(h) for h in hits), dtype=np.int64, count=k)
+    M = max(int(counts.max()) if k else 0, 1)
+    idx = np.zeros((k, M), dtype=np.int64)
+    valid = np.arange(M)[None, :] < counts[:, None]
+    if counts.sum():
+        idx[valid] = near[np.concatenate([np.asarray(h, dtype=np.int64) for h in hits])]
+    valid &= idx != curve[:, None]
+    # same sheet as the curve vertex, and outside the inner radius
+    n0 = VN[curve]
+    valid &= np.einsum("kmj,kj->km", VN[idx], n0) > _SAME_SHEET_COS
+    D = V[idx] - A[:, None, :]
+    if inner > 0:
+        valid &= np.einsum("kmj,kmj->km", D, D) >= inner * inner
+    w_area = np.where(valid, 1.0, 0.0)
+    n0 = unit(np.einsum("km,kmj->kj", w_area, VN[idx]) + n0)
+    g0 = unit(np.cross(n0, T))
+    side = np.einsum("km,kmj,kj->k", w_area, D, g0)
+    g0[side < 0] *= -1.0
+    u = np.einsum("kmj,kj->km", D, T) / band
+    v = np.einsum("kmj,kj->km", D, g0) / band
+    r2 = u * u + v * v + (np.einsum("kmj,kj->km", D, n0) / band) ** 2
+    w = np.where(valid, np.clip(1.0 - r2, 0.0, None) ** 2 + 1e-3, 0.0)
+    used = valid.sum(axis=1)
+    Z = _fit_rows(u, v, w, used)
+    beta = Z[:, 1, :] / band
+    rows = np.repeat(np.arange(k), M)
+    data = np.concatenate([beta.reshape(-1), -beta.sum(axis=1)])
+    cols = np.concatenate([idx.reshape(-1), curve])
+    rows = np.concatenate([rows, np.arange(k)])
+    keep = data != 0
+    W = sp.csr_matrix((data[keep], (rows[keep], cols[keep])), shape=(k, n))
+    c = W @ V
+    inward = unit(c - np.einsum("ij,ij->i", c, T)[:, None] * T)
+    # where the band is empty keep the rough frame
+    empty = ~valid.any(axis=1)
+    inward[empty] = g0[empty]
+    normal = unit(np.cross(inward, T))
+    normal[np.einsum("ij,ij->i", normal, n0) < 0] *= -1.0
+    return BandFit(
+        weights=W,
+        frames=SeamFrames(normal=normal, tangent=T, inward=inward),
+        band=band,
+        counts=used,
+        slope_error=_slope_error(Z, _columns(u, v, used), D, normal, band, used),
+    )
+
+
+def _slope_error(Z, X, D, normal, band: float, used: np.ndarray) -> np.ndarray:
+    """Standard error of the fitted slope off the curve, from the fit's own residuals.
+
+    The heights ``z_j`` of the band vertices over the fitted tangent plane are
+    fitted by the same least squares; their residual variance ``σ²`` (per
+    degree of freedom) and the fit's row ``Z_v`` give ``se = σ ‖Z_v‖ / band``
+    (unit-free: radians for small angles). Noise of a scan, or a surface the
+    quadratic does not follow, raises it; a clean smooth surface has ``se ≈ 0``.
+    """
+    z = np.einsum("kmj,kj->km", D, normal)
+    coef = np.einsum("kim,km->ki", Z, z)
+    quad = used >= _QUADRATIC_MIN
+    fitted = np.einsum("kmi,ki->km", X, coef)
+    present = np.abs(Z).sum(axis=1) > 0
+    r = np.where(present, z - fitted, 0.0)
+    dof = used - np.where(quad, 5, 2)
+    sigma2 = (r * r).sum(axis=1) / np.maximum(dof, 1)
+    se = np.sqrt(sigma2 * (Z[:, 1, :] ** 2).sum(axis=1)) / band
+    return np.where(dof > 0, se, 0.0)
+
+
+def _fit_rows(u: np.ndarray, v: np.ndarray, w: np.ndarray, used: np.ndarray) -> np.ndarray:
+    """Rows ``Z`` (k, 5, M) of the weighted least-squares fit by ``[u, v, u², uv, v²]``.
+
+    ``Z[:, i] @ y`` is coefficient ``i`` of the fit of values ``y`` (k, M) at
+    the band vertices; row 1 gives the ``v`` derivative at the curve vertex.
+    Where a band has fewer than :data:`_QUADRATIC_MIN` vertices the quadratic
+    columns are dropped (a plane fit) and their rows are zero.
+    """
+    X = _columns(u, v, used)
+    XtW = np.einsum("kmi,km->kim", X, w)
+    H = np.einsum("kim,kmj->kij", XtW, X)
+    # a small ridge keeps a thin or empty band solvable; it only matters there
+    ridge = 1e-8 * np.maximum(np.trace(H, axis1=1, axis2=2), 1e-12)[:, None, None]
+    return np.linalg.solve(H + ridge * np.eye(5), XtW)
+
+
+def _columns(u: np.ndarray, v: np.ndarray, used: np.ndarray) -> np.ndarray:
+    """Design columns ``[u, v, u², uv, v²]`` (k, M, 5); plane fit where a band is small."""
+    X = np.stack([u, v, u * u, u * v, v * v], axis=2)
+    X[used < _QUADRATIC_MIN, :, 2:] = 0.0
+    return X
