@@ -26,7 +26,14 @@ import scipy.sparse as sp
 
 from .frames import SeamFrames, face_normals_areas, unit, vertex_face_matrix
 
-__all__ = ["BandFit", "band_fit", "curve_tangents", "median_edge_near", "BAND_EDGES"]
+__all__ = [
+    "BandFit",
+    "band_fit",
+    "curve_tangents",
+    "along_curve_reach",
+    "median_edge_near",
+    "BAND_EDGES",
+]
 
 #: Default band width, in median edge lengths of the surfaces near the curve: wide
 #: enough that the fit sees two to three rings of ordinary triangles beyond any sliver
@@ -37,8 +44,11 @@ BAND_EDGES = 3.0
 #: normal is on another sheet of the surface (the far side of a thin wall or wing).
 _SAME_SHEET_COS = 0.35
 
+#: Half-width of a band along a closed curve, as a fraction of the curve's radius.
+ALONG_RADIUS_FRACTION = 0.5
+
 #: Fewer band vertices than this and the quadratic terms are dropped (plane fit).
-_QUADRATIC_MIN = 8
+_QUADRATIC_MIN = 12
 
 
 @dataclass(frozen=True)
@@ -109,6 +119,30 @@ def curve_tangents(P: np.ndarray, closed: bool, span: float) -> np.ndarray:
         return np.stack([np.interp(t, S, R[:, j]) for j in range(3)], axis=1)
 
     return unit(at(hi) - at(lo))
+
+
+def along_curve_reach(P: np.ndarray, closed: bool) -> float:
+    """Half-width of a band fit along its curve: :data:`ALONG_RADIUS_FRACTION` of its radius.
+
+    A closed curve of length ``L`` bends like a circle of radius ``L / 2π``; a
+    surface it runs round (a tube's end) bends as much along it, which a
+    quadratic fit over more than about half that radius cannot follow. An
+    open curve is not limited.
+
+    Parameters
+    ----------
+    P : ndarray, shape (k, 3)
+    closed : bool
+
+    Returns
+    -------
+    float
+        ``inf`` for an open curve.
+    """
+    if not closed or len(P) < 3:
+        return float("inf")
+    length = float(np.linalg.norm(np.diff(np.vstack([P, P[:1]]), axis=0), axis=1).sum())
+    return ALONG_RADIUS_FRACTION * length / (2.0 * np.pi)
 
 
 def median_edge_near(V: np.ndarray, F: np.ndarray, curve: np.ndarray, rings: int = 2) -> float:
@@ -223,10 +257,15 @@ def band_fit(
     g0 = unit(np.cross(n0, T))
     side = np.einsum("km,kmj,kj->k", w_area, D, g0)
     g0[side < 0] *= -1.0
+    along = min(band, along_curve_reach(P, closed))
     u = np.einsum("kmj,kj->km", D, T) / band
     v = np.einsum("kmj,kj->km", D, g0) / band
-    r2 = u * u + v * v + (np.einsum("kmj,kj->km", D, n0) / band) ** 2
-    w = np.where(valid, np.clip(1.0 - r2, 0.0, None) ** 2 + 1e-3, 0.0)
+    # an ellipsoid: ``along`` wide in the curve's direction, ``band`` across it and
+    # off the surface, so the bend of a tube around its end stays out of the fit
+    ua = u * (band / along)
+    r2 = ua * ua + v * v + (np.einsum("kmj,kj->km", D, n0) / band) ** 2
+    valid &= r2 <= 1.0
+    w = np.where(valid, (1.0 - r2) ** 2 + 1e-3, 0.0)
     used = valid.sum(axis=1)
     Z = _fit_rows(u, v, w, used)
     beta = Z[:, 1, :] / band
@@ -267,7 +306,7 @@ def _slope_error(Z, X, D, normal, band: float, used: np.ndarray) -> np.ndarray:
     fitted = np.einsum("kmi,ki->km", X, coef)
     present = np.abs(Z).sum(axis=1) > 0
     r = np.where(present, z - fitted, 0.0)
-    dof = used - np.where(quad, 5, 2)
+    dof = used - np.where(quad, X.shape[2], 2)
     sigma2 = (r * r).sum(axis=1) / np.maximum(dof, 1)
     se = np.sqrt(sigma2 * (Z[:, 1, :] ** 2).sum(axis=1)) / band
     return np.where(dof > 0, se, 0.0)
@@ -286,11 +325,12 @@ def _fit_rows(u: np.ndarray, v: np.ndarray, w: np.ndarray, used: np.ndarray) -> 
     H = np.einsum("kim,kmj->kij", XtW, X)
     # a small ridge keeps a thin or empty band solvable; it only matters there
     ridge = 1e-8 * np.maximum(np.trace(H, axis1=1, axis2=2), 1e-12)[:, None, None]
-    return np.linalg.solve(H + ridge * np.eye(5), XtW)
+    return np.linalg.solve(H + ridge * np.eye(H.shape[1]), XtW)
 
 
 def _columns(u: np.ndarray, v: np.ndarray, used: np.ndarray) -> np.ndarray:
     """Design columns ``[u, v, u², uv, v²]`` (k, M, 5); plane fit where a band is small."""
-    X = np.stack([u, v, u * u, u * v, v * v], axis=2)
+    uu = u * u
+    X = np.stack([u, v, uu, u * v, v * v, uu * u, uu * uu, uu * v], axis=2)
     X[used < _QUADRATIC_MIN, :, 2:] = 0.0
     return X

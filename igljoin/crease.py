@@ -28,6 +28,7 @@ import numpy as np
 
 from .bandfit import BAND_EDGES, band_fit, median_edge_near
 from .correspond import rigid_fit
+from .frames import unit
 
 __all__ = ["CreaseMeasure", "seam_crease", "input_crease", "default_band"]
 
@@ -73,18 +74,22 @@ def default_band(
     Returns
     -------
     float
-        In mesh units; also at most a quarter of the guest's bounding-box diagonal.
+        In mesh units; also at most a quarter of the guest's size (twice its
+        largest distance from its centroid).
     """
     h = max(median_edge_near(Vh, Fh, host_curve), median_edge_near(Vg, Fg, guest_curve))
     used = np.unique(np.asarray(Fg, dtype=np.int64))
     Vu = np.asarray(Vg, dtype=np.float64)[used] if used.size else np.zeros((1, 3))
-    size = float(np.linalg.norm(np.ptp(Vu, axis=0)))
+    # twice the largest distance from the centroid: unlike a bounding box's
+    # diagonal, it does not change when the guest is turned
+    size = 2.0 * float(np.linalg.norm(Vu - Vu.mean(axis=0), axis=1).max())
     return float(min(BAND_EDGES * h, 0.25 * size)) if size > 0 else float(BAND_EDGES * h)
 
 
-def _measure(guest, host, R: np.ndarray | None = None) -> CreaseMeasure:
+def _measure(guest, host, R: np.ndarray | None = None, g=None) -> CreaseMeasure:
     """Angle between the guest's direction off the seam and the host's continued."""
-    g = guest.frames.inward if R is None else guest.frames.inward @ R.T
+    if g is None:
+        g = guest.frames.inward if R is None else guest.frames.inward @ R.T
     cos = np.clip(np.einsum("ij,ij->i", g, -host.frames.inward), -1.0, 1.0)
     noise = np.hypot(guest.slope_error, host.slope_error)
     return CreaseMeasure(np.degrees(np.arccos(cos)), float(host.band), np.degrees(noise))
@@ -99,6 +104,7 @@ def seam_crease(
     guest_at_host: np.ndarray,
     closed: bool,
     band: float | None = None,
+    rest: np.ndarray | None = None,
 ) -> CreaseMeasure:
     """Crease between a guest lying on the host curve and the host, at band scale.
 
@@ -116,6 +122,11 @@ def seam_crease(
     closed : bool
     band : float, optional
         Band width in mesh units (default :func:`default_band`).
+    rest : ndarray, shape (n_g, 3), optional
+        Rest positions of a deformed guest. The guest is then fitted in its rest
+        coordinates (which band vertices, at which ``u, v``), as the smooth-join
+        term does; the noise is that of the rest surface. Without it the guest
+        is fitted as it lies (for a guest in place, the two agree).
 
     Returns
     -------
@@ -124,6 +135,11 @@ def seam_crease(
     if band is None:
         band = default_band(Vh, Fh, host_curve, Vg, Fg, guest_at_host)
     host = band_fit(Vh, Fh, host_curve, closed, band)
+    if rest is not None:
+        guest = band_fit(rest, Fg, guest_at_host, closed, band)
+        c = guest.weights @ np.asarray(Vg, dtype=np.float64)
+        T = host.frames.tangent
+        return _measure(guest, host, g=unit(c - np.einsum("ij,ij->i", c, T)[:, None] * T))
     P = np.asarray(Vh, dtype=np.float64)[np.asarray(host_curve, dtype=np.int64)]
     guest = band_fit(Vg, Fg, guest_at_host, closed, band, curve_points=P)
     return _measure(guest, host)

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from . import crease, metrics
+from . import band_targets, crease, metrics
 from .bandfit import band_fit
 from .boundary import Curve, SelectedCurve, boundary_loops, select_curve
 from .correspond import Correspondence, correspond, pair_seams, rigid_fit
@@ -48,15 +48,6 @@ _STRUCTURAL = JoinOptions.structural_fields()
 
 _SHOWN = 5  # shared vertices listed in an error message
 
-
-
-#: A crease within this many standard errors of zero (``noise``) is not told from
-#: the scan noise of the surfaces: the band smooth join leaves it (two: about 95 %).
-CREASE_NOISE_SIGMAS = 2.0
-
-#: Largest automatic band tolerance, degrees: noisier bands than this are a poor fit
-#: (a real feature inside the band), not noise to be left alone.
-MAX_NOISE_TOLERANCE = 10.0
 
 
 def _interpolate_frames(frames: SeamFrames, edge: np.ndarray, t: np.ndarray, closed: bool):
@@ -611,6 +602,7 @@ class JoinSolver:
             k = edge_stiffness(self.E, c.F, *self._stiffness())
             terms.append(StretchTerm(c.V, self.E, opt.stretch_weight * k))
         self.smooth_tolerances_deg = []
+        self.crease_removed = []
         self.bands = [
             opt.smooth_band
             or crease.default_band(
@@ -620,26 +612,7 @@ class JoinSolver:
         ]
         if opt.smooth and opt.smooth_weight > 0 and opt.smooth_mode == "band":
             for p, part, band in zip(self.pairs, parts, self.bands):
-                hc = p.host_curve
-                host_fit = band_fit(self.host.V, self.host.F, hc.indices, hc.closed, band)
-                at_seam = _interpolate_frames(
-                    host_fit.frames, part.host_edge, part.host_edge_t, hc.closed
-                )
-                guest_fit = band_fit(c.V, c.F, part.seam, hc.closed, band)
-                tolerance = self._band_tolerance(host_fit, guest_fit, part, hc.closed)
-                self.smooth_tolerances_deg.append(float(np.median(tolerance)))
-                terms.append(
-                    SmoothJoinTerm(
-                        c.V,
-                        c.F,
-                        part.seam,
-                        at_seam,
-                        opt.smooth_weight,
-                        "band",
-                        np.radians(tolerance),
-                        fit=guest_fit,
-                    )
-                )
+                terms.append(self._band_term(p.host_curve, part, band))
         elif opt.smooth and opt.smooth_weight > 0:
             for p, part, mean_edge in zip(self.pairs, parts, self.host_mean_edges):
                 hc = p.host_curve
@@ -667,23 +640,46 @@ class JoinSolver:
         self.factorizations += 1
         self.timings.update(correspond=t1 - t0, terms=t2 - t1, factor=self.solver.factor_seconds)
 
-    def _band_tolerance(self, host_fit, guest_fit, part, closed: bool) -> np.ndarray:
-        """Crease (degrees) the band smooth join leaves alone at each seam vertex.
+    def _band_term(self, hc: SelectedCurve, part, band: float) -> SmoothJoinTerm:
+        """The band smooth-join term of one seam (:mod:`igljoin.band_targets`).
 
-        ``smooth_tolerance`` if given; else :data:`CREASE_NOISE_SIGMAS` standard
-        errors of the crease measured there (from the residuals of the host's and
-        the rest guest's band fits): a crease the band cannot tell from scan noise
-        is not chased, so a piece that already joins smoothly is not moved.
+        The host's band-fitted tangent planes at the seam targets are tilted by
+        the elevation the join keeps (the rest guest's, less the crease coherent
+        along the seam), and the guest's band-fitted direction off each seam
+        vertex is pulled into them. ``smooth_tolerance`` widens that into a wedge.
         """
-        if self.options.smooth_tolerance is not None:
-            return np.full(len(part.seam), float(self.options.smooth_tolerance))
-        host_se = host_fit.slope_error
-        k = len(host_se)
+        c, opt = self.corr, self.options
+        host_fit = band_fit(self.host.V, self.host.F, hc.indices, hc.closed, band)
+        at_seam = _interpolate_frames(host_fit.frames, part.host_edge, part.host_edge_t, hc.closed)
+        guest_fit = band_fit(c.V, c.F, part.seam, hc.closed, band)
+        k = len(hc.indices)
         edge, t = part.host_edge, part.host_edge_t
-        nxt = (edge + 1) % k if closed else np.minimum(edge + 1, k - 1)
-        at_seam = host_se[edge] * (1.0 - t) + host_se[nxt] * t
-        se = np.hypot(at_seam, guest_fit.slope_error)
-        return np.degrees(np.minimum(CREASE_NOISE_SIGMAS * se, np.radians(MAX_NOISE_TOLERANCE)))
+        nxt = (edge + 1) % k if hc.closed else np.minimum(edge + 1, k - 1)
+        P = self.host.V[hc.indices]
+        targets = P[edge] * (1.0 - t)[:, None] + P[nxt] * t[:, None]
+        host_se = host_fit.slope_error[edge] * (1.0 - t) + host_fit.slope_error[nxt] * t
+        kept, removed = band_targets.kept_elevation(
+            at_seam,
+            guest_fit.frames.inward,
+            c.V[part.seam],
+            targets,
+            np.hypot(host_se, guest_fit.slope_error),
+            hc.closed,
+            band,
+        )
+        self.crease_removed.append(np.degrees(np.abs(removed)))
+        tolerance = float(opt.smooth_tolerance or 0.0)
+        self.smooth_tolerances_deg.append(tolerance)
+        return SmoothJoinTerm(
+            c.V,
+            c.F,
+            part.seam,
+            band_targets.tilted_frames(at_seam, kept),
+            opt.smooth_weight,
+            "band",
+            np.radians(tolerance),
+            fit=guest_fit,
+        )
 
     def _smooth_tolerance(self, smoothed: SeamFrames, hc: SelectedCurve) -> float:
         """Crease (degrees) the robust smooth join tolerates: the host's own normal noise.
@@ -951,7 +947,9 @@ class JoinSolver:
             hc = p.host_curve
             s = len(part.seam)
             at_host = part.seam[part.host_hit]
-            measured = crease.seam_crease(host.V, host.F, hc.indices, X, c.F, at_host, hc.closed, band)
+            measured = crease.seam_crease(
+                host.V, host.F, hc.indices, X, c.F, at_host, hc.closed, band, rest=c.V
+            )
             seam_crease = measured.angles
             noise_all.append(measured.noise)
             onering = metrics.crease_angles(host.V, host.F, hc.indices, X, c.F, at_host, hc.closed)
@@ -993,6 +991,11 @@ class JoinSolver:
                     },
                     "crease_onering_deg": metrics.summary(onering),
                     "input_crease_deg": {**metrics.summary(inputs), "band": band},
+                    "crease_removed_deg": metrics.summary(
+                        self.crease_removed[len(per_seam)]
+                        if self.crease_removed
+                        else np.zeros(0)
+                    ),
                     "host_dihedral_deg": {
                         **metrics.summary(dihedral),
                         "rings": metrics.HOST_DIHEDRAL_RINGS,
@@ -1040,6 +1043,9 @@ class JoinSolver:
             "vertex_strain": metrics.summary(vertex_strain),
             "displacement_nonrigid": metrics.summary(displacement),
             "folded_pairs": len(folds),
+            "crease_removed_deg": metrics.summary(
+                np.concatenate(self.crease_removed) if self.crease_removed else np.zeros(0)
+            ),
             "seams": per_seam,
         }
         result = JoinResult(

@@ -556,18 +556,32 @@ class SmoothJoinTerm(Term):
     fit : BandFit, optional
         Band mode: the rest guest's band fit along ``seam``
         (:func:`igljoin.bandfit.band_fit`); its rows become ``K``.
+    active : ndarray of bool, shape (s,), optional
+        Band mode: seam vertices the term acts on (default all); the others
+        keep a row of weight 0.
     """
 
     name = "smooth"
 
     def __init__(
-        self, V0, F, seam, frames: SeamFrames, weight=1.0, mode="robust", tolerance=0.0, fit=None
+        self,
+        V0,
+        F,
+        seam,
+        frames: SeamFrames,
+        weight=1.0,
+        mode="robust",
+        tolerance=0.0,
+        fit=None,
+        active=None,
     ):
         n = len(V0)
         self.mode = mode
         if mode == "band":
             self.tolerance = np.broadcast_to(np.asarray(tolerance, dtype=np.float64), len(seam))
             self._init_band(n, frames, weight, fit)
+            if active is not None:
+                self.weights = np.where(np.asarray(active, dtype=bool), self.weights, 0.0)
             return
         self.tolerance = float(tolerance)
         on_seam = np.zeros(n, dtype=bool)

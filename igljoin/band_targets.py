@@ -1,0 +1,163 @@
+"""Which crease the band smooth join removes: the one coherent along the seam.
+
+The band fits (:mod:`igljoin.bandfit`) give, at each seam vertex, the signed
+*elevation* ``φ`` of the rest guest's direction off the seam above the host's
+tangent plane continued across it (about the curve tangent; the rest guest
+moved rigidly onto the host curve). ``φ`` is the crease the inputs meet at,
+plus the error of the fits: scan noise, the facets of a coarse mesh, a sliver.
+
+A crease that joining should remove is coherent along the seam (a tube that
+arrives at an angle, a patch whose boundary is too short): it survives an
+average over a stretch of seam several bands long. The error of the fits does
+not: it changes from one vertex to the next. So the join removes the average
+``φ̄`` — only where it stands clear of its own standard error — and keeps the
+rest, ``ψ = φ − shrink(φ̄)``, as the rest guest has it. A piece joined back
+where it was cut from then keeps its shape exactly (``φ̄`` is insignificant
+there), while a guest that meets the host at an angle is turned smooth.
+
+:func:`kept_elevation` computes ``ψ``; :func:`tilted_frames` tilts the host
+frames by it, which is all the smooth-join term needs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .bandfit import along_curve_reach
+from .correspond import rigid_fit
+from .frames import SeamFrames, unit
+
+__all__ = ["kept_elevation", "tilted_frames", "BANDS_PER_MODE", "MAX_MODE", "SIGNIFICANCE"]
+
+#: A mode along the seam has at least this many band widths per half-period, so
+#: that it averages several independent band fits.
+BANDS_PER_MODE = 2.0
+
+#: Highest mode along the seam (a tube's bend is mode 1, an oval's mode 2).
+MAX_MODE = 4
+
+#: An average crease below this many of its standard errors is not removed.
+SIGNIFICANCE = 2.0
+
+
+def _arc_positions(P: np.ndarray, closed: bool) -> tuple[np.ndarray, float]:
+    Q = np.vstack([P, P[:1]]) if closed else P
+    seg = np.linalg.norm(np.diff(Q, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    return s[: len(P)], float(s[-1])
+
+
+def _seam_modes(P: np.ndarray, closed: bool, band: float) -> tuple[np.ndarray, np.ndarray]:
+    """Smooth functions along the seam (k, m) and each vertex's share of its length (k,).
+
+    A closed seam gets the Fourier modes ``1, cos θ, sin θ, …`` of its arc-length
+    angle, an open one Legendre polynomials of its arc-length parameter; as
+    many as fit :data:`BANDS_PER_MODE` bands into each half-period, at most
+    :data:`MAX_MODE`.
+    """
+    s, length = _arc_positions(P, closed)
+    k = len(P)
+    Q = np.vstack([P, P[:1]]) if closed else P
+    seg = np.linalg.norm(np.diff(Q, axis=0), axis=1)
+    if closed:
+        share = 0.5 * (seg + np.roll(seg, 1))
+    else:
+        share = 0.5 * (np.r_[seg, 0.0] + np.r_[0.0, seg])
+    if length <= 0 or k < 2:
+        return np.ones((k, 1)), np.ones(k)
+    order = int(np.clip(length / (2.0 * BANDS_PER_MODE * band), 0, MAX_MODE))
+    if closed:
+        theta = 2.0 * np.pi * s / length
+        cols = [np.ones(k)]
+        for j in range(1, order + 1):
+            cols += [np.cos(j * theta), np.sin(j * theta)]
+    else:
+        x = 2.0 * s / length - 1.0
+        cols = [np.polynomial.legendre.legval(x, np.eye(order + 1)[j]) for j in range(order + 1)]
+    return np.stack(cols, axis=1), share / length
+
+
+def kept_elevation(
+    host: SeamFrames,
+    guest_inward: np.ndarray,
+    guest_points: np.ndarray,
+    targets: np.ndarray,
+    slope_error: np.ndarray,
+    closed: bool,
+    band: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Elevation (radians) the join keeps at each seam vertex, and the one it removes.
+
+    Parameters
+    ----------
+    host : SeamFrames
+        Host frames (band fit) at each guest seam vertex's target, shape (s, 3) each.
+    guest_inward : ndarray, shape (s, 3)
+        Rest guest's band-fitted direction into the guest at each seam vertex.
+    guest_points : ndarray, shape (s, 3)
+        Rest positions of the guest seam vertices.
+    targets : ndarray, shape (s, 3)
+        Their positions on the host curve.
+    slope_error : ndarray, shape (s,)
+        Standard error of each elevation (radians), host and guest fits combined.
+    closed : bool
+    band : float
+        Band width (mesh units).
+
+    Returns
+    -------
+    kept : ndarray, shape (s,)
+        ``ψ = φ − removed``: the elevation the joined guest leaves the seam at.
+    removed : ndarray, shape (s,)
+        The coherent, significant part of the crease the join removes.
+    """
+    R, _ = rigid_fit(guest_points, targets)
+    g = guest_inward @ R.T
+    outward = -host.inward
+    phi = np.arctan2(np.einsum("ij,ij->i", g, host.normal), np.einsum("ij,ij->i", g, outward))
+    # a band fit spans ``reach`` along the seam (less than ``band`` round a tube's end)
+    reach = min(band, along_curve_reach(targets, closed))
+    B, share = _seam_modes(targets, closed, reach)
+    # weighted least squares of φ on the modes, each vertex weighing by its share
+    # of the seam; neighbouring fits share one band, so count one independent
+    # error per band of seam when taking the coefficients' standard errors
+    W = share / share.sum()
+    H = B.T @ (W[:, None] * B)
+    Hinv = np.linalg.pinv(H)
+    coef = Hinv @ (B.T @ (W * phi))
+    _, length = _arc_positions(targets, closed)
+    correlated = max(1.0, reach * len(phi) / max(length, 1e-300))
+    A = Hinv @ (B.T * W)  # coef = A @ phi
+    # the error of each φ: the larger of the fits' own standard error and the
+    # scatter of φ about the modes (which also holds what the fits' residuals miss,
+    # e.g. the facets of a coarse mesh), counted once per band of seam
+    independent = max(len(phi) / correlated, 1.0)
+    dof = max(independent - B.shape[1], 1.0)
+    scatter = float(np.sum(W * (phi - B @ coef) ** 2)) * independent / dof
+    error2 = np.maximum(slope_error**2, scatter)
+    se = np.sqrt((A**2 @ error2) * correlated)
+    shrunk = np.sign(coef) * np.maximum(np.abs(coef) - SIGNIFICANCE * se, 0.0)
+    removed = B @ shrunk
+    return phi - removed, removed
+
+
+def tilted_frames(host: SeamFrames, kept: np.ndarray) -> SeamFrames:
+    """Host frames turned about the tangent so that the continued plane rises by ``kept``.
+
+    Parameters
+    ----------
+    host : SeamFrames
+        Shape (s, 3) each.
+    kept : ndarray, shape (s,)
+        Radians.
+
+    Returns
+    -------
+    SeamFrames
+        ``inward`` is minus the tilted outward direction; ``normal`` is turned with it.
+    """
+    c, s = np.cos(kept)[:, None], np.sin(kept)[:, None]
+    outward = -host.inward
+    tilted_out = unit(c * outward + s * host.normal)
+    tilted_normal = unit(c * host.normal - s * outward)
+    return SeamFrames(normal=tilted_normal, tangent=host.tangent, inward=-tilted_out)
