@@ -325,9 +325,12 @@ def _tube_continuation():
     return host, guest
 
 
-def test_untouched_real_piece_converges_at_once(real_cuts):
+@pytest.mark.parametrize("smooth", [False, True])
+def test_untouched_real_piece_converges_at_once(real_cuts, smooth):
+    # with the smooth term (band mode, the default) too: the crease these pieces meet
+    # their hosts at is the fits' noise, which the band term keeps
     for name, cut in real_cuts:
-        res = igljoin.join(cut.host, cut.piece, cut.host_curve, cut.piece_at_host, smooth=False)
+        res = igljoin.join(cut.host, cut.piece, cut.host_curve, cut.piece_at_host, smooth=smooth)
         assert res.converged and res.stop_reason == "tolerance", name
         assert res.iterations <= AT_ONCE, (name, res.iterations)
         # it does not move: displacement at rounding level of the coordinates (1e-9 of the
@@ -338,9 +341,10 @@ def test_untouched_real_piece_converges_at_once(real_cuts):
 def test_joined_tube_converges_at_once_with_and_without_the_smooth_term():
     host, guest = _tube_continuation()
     loop = phantoms.tube_end_loop(48)
-    # the paper's smooth term is exactly zero on a smooth continuation; the robust one
-    # is not (it moves this guest), and is covered by the warm-start test below
-    for options in ({"smooth": False}, {"smooth": True, "smooth_mode": "paper"}):
+    # the paper's smooth term is exactly zero on a smooth continuation, and so is the
+    # band term (the default); the robust one is not (it moves this guest), and is
+    # covered by the warm-start test below
+    for options in ({"smooth": False}, {"smooth": True, "smooth_mode": "paper"}, {}):
         res = igljoin.join(host, guest, loop, loop, **options)
         assert res.converged and res.stop_reason == "tolerance", options
         assert res.iterations <= AT_ONCE, (options, res.iterations)
