@@ -3,6 +3,7 @@
 Usage::
 
     python pipelines/corpus_study.py [--out FILE] [--only TEXT]
+    python pipelines/corpus_study.py --search MESH   # print new places for CORPUS
 
 Every case of the corpus (``tests/cuts.py``: ``CORPUS``, pymeshlab's sample
 meshes cut by balls, by planes along edges and by planes splitting
@@ -230,12 +231,92 @@ def page(rows: list[dict], measure_name: str, seconds: float) -> str:
     )
 
 
+#: Piece sizes (vertices) of the three places of a mesh and style, capped at 40 % of the mesh.
+SIZE_BANDS = ((40, 100), (250, 900), (1500, 5000))
+
+
+def plane_share(case, cut, center: np.ndarray) -> float:
+    """Share of the seam's vertices that the plane (not the ball) bounds.
+
+    A split cut's seam vertex is on the plane to rounding; a cut along edges
+    has its seam vertices within half a seam edge of it.
+    """
+    n = np.asarray(case.normal, dtype=np.float64)
+    n /= np.linalg.norm(n)
+    P = cut.host.V[cut.host_curve]
+    d = np.abs((P - center) @ n + case.offset)
+    e = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
+    tol = 1e-9 * cut.diameter if case.style == "split" else 0.5 * e.mean()
+    return float(np.mean(d <= tol))
+
+
+def search(cuts, mesh_name: str, seed: int = 0) -> list:
+    """Seeded draws of clean cuts of one mesh: three sizes per style (how CORPUS was made).
+
+    A draw is a random used vertex, a ball radius for a piece size drawn in
+    the band (from the mesh's area per vertex, times 1-1.6) and, for plane
+    cuts, the plane through the point 15-50 % of the radius below the vertex
+    along its (rounded) vertex normal. A plane cut is kept only when the
+    plane bounds at least half of its seam, and a split cut only when its
+    shortest seam edge is under a tenth of the mean (slivers). A piece with
+    two vertices at one position is skipped.
+    """
+    import igl
+
+    mesh = cuts.read_sample(mesh_name)
+    used = np.unique(mesh.F)
+    N = igl.per_vertex_normals(mesh.V, mesh.F)
+    area = float(igl.doublearea(mesh.V, mesh.F).sum() / 2)
+    rng = np.random.default_rng(seed)
+    found = []
+    for style in cuts.STYLES:
+        for lo, hi in SIZE_BANDS:
+            hi = min(hi, int(0.4 * len(used)))
+            lo = min(lo, hi // 2)
+            for _ in range(2000):
+                c = int(rng.choice(used))
+                target = np.exp(rng.uniform(np.log(lo), np.log(hi)))
+                r = round(
+                    float(np.sqrt(area * target / len(used) / np.pi) * rng.uniform(1, 1.6)), 4
+                )
+                normal = tuple(round(float(x), 3) + 0.0 for x in N[c])
+                offset = round(float(rng.uniform(0.15, 0.5)) * r, 4)
+                case = cuts.CorpusCase(mesh_name, style, c, r, normal, offset)
+                try:
+                    cut = cuts.corpus_cut(case, mesh)
+                except RuntimeError:
+                    continue
+                if not lo <= cut.piece.n_vertices <= hi:
+                    continue
+                if len(np.unique(cut.piece.V, axis=0)) < cut.piece.n_vertices:
+                    continue  # the cow has two vertices at one place: the join refuses them
+                if style != "ball" and plane_share(case, cut, mesh.V[c]) < 0.5:
+                    continue
+                if style == "split":
+                    P = cut.host.V[cut.host_curve]
+                    e = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
+                    if e.min() > 0.1 * e.mean():
+                        continue
+                found.append((case, cut.piece.n_vertices))
+                break
+    return found
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("corpus_study.md"))
     parser.add_argument("--only", default="", help="only the cases whose name contains this")
+    parser.add_argument("--search", metavar="MESH", help="print seeded new places for MESH")
     args = parser.parse_args(argv)
     cuts = _load_cuts()
+    if args.search:
+        for case, n in search(cuts, args.search):
+            print(
+                f'    _case("{case.mesh}", "{case.style}", {case.center}, {case.radius}'
+                + ("" if case.style == "ball" else f", {case.normal}, {case.offset}")
+                + f"),  # {n} vertices"
+            )
+        return 0
     measure_name = cuts.crease_measure_name()
     t0 = time.perf_counter()
     meshes, rows = {}, []

@@ -337,51 +337,53 @@ def _case(mesh, style, center, radius, normal=(0.0, 0.0, 1.0), offset=0.0, creas
 
 #: The corpus: five real meshes x three cut styles x three places (small,
 #: middle, large pieces), plus cuts across the airplane's sharp wing edges.
-#: The places were drawn once from a seeded search (a random vertex, a ball
-#: radius for a target piece size, the plane through a point at 15-50 % of
-#: the radius below the vertex along its normal) and are written out here so
-#: that the corpus does not depend on a search.
+#: The places were drawn once by ``pipelines/corpus_study.py --search MESH``
+#: (seed 0: a random vertex, a ball radius for a target piece size, the plane
+#: 15-50 % of the radius below the vertex across its normal; plane cuts whose
+#: plane bounds at least half the seam, split cuts with slivers) and are
+#: written out here, so that the corpus does not depend on the search.
+#: Comments give the piece's vertex count.
 CORPUS: tuple[CorpusCase, ...] = (
     # bunny10k_textured.obj: 5,051 vertices, open (5 loops)
-    _case("bunny10k_textured.obj", "ball", 4123, 1.8785),
-    _case("bunny10k_textured.obj", "ball", 1253, 4.9602),
-    _case("bunny10k_textured.obj", "ball", 1891, 9.2493),
-    _case("bunny10k_textured.obj", "edges", 3163, 1.5963, (-0.054, 0.179, -0.982), 0.3671),
-    _case("bunny10k_textured.obj", "edges", 3564, 5.5216, (0.131, -0.359, -0.924), 1.5066),
-    _case("bunny10k_textured.obj", "edges", 1430, 6.5277, (0.981, -0.138, -0.137), 2.9086),
-    _case("bunny10k_textured.obj", "split", 3571, 1.5562, (0.281, -0.557, -0.782), 0.3953),
-    _case("bunny10k_textured.obj", "split", 1288, 4.954, (0.379, -0.841, 0.386), 2.2646),
-    _case("bunny10k_textured.obj", "split", 691, 7.705, (-0.237, 0.874, 0.424), 2.8678),
+    _case("bunny10k_textured.obj", "ball", 3685, 1.7257),  # 70 vertices
+    _case("bunny10k_textured.obj", "ball", 3462, 4.6872),  # 610 vertices
+    _case("bunny10k_textured.obj", "ball", 1896, 10.944),  # 1767 vertices
+    _case("bunny10k_textured.obj", "edges", 2931, 2.2525, (-0.943, -0.3, 0.141), 0.421),  # 92
+    _case("bunny10k_textured.obj", "edges", 2722, 6.5616, (-0.872, -0.203, -0.445), 1.0494),  # 360
+    _case("bunny10k_textured.obj", "edges", 2647, 12.0487, (-0.74, 0.171, -0.651), 2.3421),  # 1135
+    _case("bunny10k_textured.obj", "split", 1383, 1.847, (0.271, 0.165, 0.948), 0.5232),  # 96
+    _case("bunny10k_textured.obj", "split", 713, 5.9758, (0.102, 0.636, 0.765), 2.0706),  # 788
+    _case("bunny10k_textured.obj", "split", 3986, 7.937, (-0.524, 0.038, -0.851), 2.3502),  # 1570
     # bunny.obj: 28,088 vertices, closed
-    _case("bunny.obj", "ball", 22975, 0.0266),
-    _case("bunny.obj", "ball", 11366, 0.0709),
-    _case("bunny.obj", "ball", 14942, 0.1964),
-    _case("bunny.obj", "edges", 188, 0.0299, (0.201, -0.046, 0.979), 0.0123),
-    _case("bunny.obj", "edges", 27916, 0.0981, (0.217, -0.976, -0.013), 0.0168),
-    _case("bunny.obj", "edges", 21087, 0.1988, (0.18, 0.013, -0.984), 0.0331),
-    _case("bunny.obj", "split", 6185, 0.0215, (-0.062, 0.223, 0.973), 0.0077),
-    _case("bunny.obj", "split", 2118, 0.0875, (-0.244, 0.962, -0.122), 0.0384),
-    _case("bunny.obj", "split", 27909, 0.2098, (0.23, -0.972, 0.055), 0.0694),
+    _case("bunny.obj", "ball", 23892, 0.0237),  # 58 vertices
+    _case("bunny.obj", "ball", 20490, 0.0776),  # 599 vertices
+    _case("bunny.obj", "ball", 21484, 0.2113),  # 4986 vertices
+    _case("bunny.obj", "edges", 15137, 0.0391, (-0.783, 0.473, 0.403), 0.0063),  # 88 vertices
+    _case("bunny.obj", "edges", 1873, 0.0847, (0.921, 0.388, -0.037), 0.0199),  # 704 vertices
+    _case("bunny.obj", "edges", 13265, 0.1412, (0.068, -0.952, -0.298), 0.0247),  # 1610 vertices
+    _case("bunny.obj", "split", 7841, 0.0281, (0.407, 0.796, 0.449), 0.0081),  # 76 vertices
+    _case("bunny.obj", "split", 17128, 0.0766, (-0.628, 0.553, -0.548), 0.0203),  # 511 vertices
+    _case("bunny.obj", "split", 25246, 0.1955, (0.513, -0.796, -0.322), 0.0542),  # 3576 vertices
     # cow.obj: 2,904 vertices, closed, coarse
-    _case("cow.obj", "ball", 628, 0.1787),
-    _case("cow.obj", "ball", 1958, 0.5047),
-    _case("cow.obj", "ball", 2137, 0.7593),
-    _case("cow.obj", "edges", 426, 0.1805, (0.654, -0.517, -0.552), 0.0852),
-    _case("cow.obj", "edges", 2496, 0.5424, (-0.874, -0.059, 0.482), 0.1869),
-    _case("cow.obj", "edges", 2704, 0.5038, (0.146, 0.603, 0.784), 0.2469),
-    _case("cow.obj", "split", 1805, 0.1711, (-0.782, 0.622, -0.041), 0.0513),
-    _case("cow.obj", "split", 1352, 0.4059, (-0.043, 0.835, -0.548), 0.1534),
-    _case("cow.obj", "split", 2715, 0.5705, (0.726, 0.672, 0.146), 0.1772),
+    _case("cow.obj", "ball", 2118, 0.1762),  # 82 vertices
+    _case("cow.obj", "ball", 2221, 0.4934),  # 596 vertices
+    _case("cow.obj", "ball", 900, 0.6727),  # 697 vertices
+    _case("cow.obj", "edges", 1685, 0.2181, (-0.952, 0.142, 0.271), 0.0408),  # 46 vertices
+    _case("cow.obj", "edges", 1204, 0.4494, (0.22, -0.705, 0.674), 0.2133),  # 401 vertices
+    _case("cow.obj", "edges", 1066, 0.758, (0.816, 0.576, -0.057), 0.1753),  # 874 vertices
+    _case("cow.obj", "split", 193, 0.1737, (0.598, 0.455, 0.659), 0.0407),  # 85 vertices
+    _case("cow.obj", "split", 1604, 0.5826, (-0.98, -0.144, -0.139), 0.0962),  # 397 vertices
+    _case("cow.obj", "split", 1633, 0.7976, (-0.765, -0.589, 0.262), 0.1663),  # 712 vertices
     # airplane.obj: 5,400 used vertices, closed, CAD-like with sharp edges
-    _case("airplane.obj", "ball", 1410, 0.107),
-    _case("airplane.obj", "ball", 3800, 0.186),
-    _case("airplane.obj", "ball", 2899, 0.7048),
-    _case("airplane.obj", "edges", 1537, 0.0747, (0.0, 1.0, 0.0), 0.0295),
-    _case("airplane.obj", "edges", 2389, 0.2535, (0.01, -0.999, 0.043), 0.0858),
-    _case("airplane.obj", "edges", 5282, 0.7303, (-0.041, -0.999, -0.001), 0.1353),
-    _case("airplane.obj", "split", 3624, 0.0702, (-0.228, 0.955, 0.188), 0.0254),
-    _case("airplane.obj", "split", 2922, 0.2099, (0.05, -0.998, 0.025), 0.0627),
-    _case("airplane.obj", "split", 1281, 0.5438, (0.007, 0.849, -0.529), 0.1118),
+    _case("airplane.obj", "ball", 4593, 0.0779),  # 85 vertices
+    _case("airplane.obj", "ball", 28, 0.3584),  # 669 vertices
+    _case("airplane.obj", "ball", 671, 0.6375),  # 1409 vertices
+    _case("airplane.obj", "edges", 3885, 0.0969, (-0.901, 0.432, -0.041), 0.0447),  # 66 vertices
+    _case("airplane.obj", "edges", 2431, 0.2436, (0.168, -0.964, -0.206), 0.0443),  # 263 vertices
+    _case("airplane.obj", "edges", 443, 0.6474, (0.042, 0.999, 0.0), 0.1301),  # 1932 vertices
+    _case("airplane.obj", "split", 1702, 0.0833, (0.13, 0.444, 0.887), 0.0337),  # 89 vertices
+    _case("airplane.obj", "split", 957, 0.2198, (-0.958, 0.277, 0.075), 0.1002),  # 399 vertices
+    _case("airplane.obj", "split", 132, 0.6136, (0.279, 0.949, 0.148), 0.112),  # 1110 vertices
     # the wing tip (vertex 1733, largest x) cut off by a plane across the span:
     # the seam crosses the wing's sharp leading and trailing edges
     _case("airplane.obj", "split", 1733, 0.5, (1.0, 0.0, 0.0), 0.15),
@@ -392,15 +394,15 @@ CORPUS: tuple[CorpusCase, ...] = (
     _case("airplane.obj", "edges", 1921, 0.25, (0.0, 0.0, 1.0), 0.02, creased=True),
     _case("airplane.obj", "edges", 1920, 0.25, (0.0, 0.0, -1.0), 0.01, creased=True),
     # bone.ply: 1,513 used vertices, closed, coarse scan
-    _case("bone.ply", "ball", 576, 0.1192),
-    _case("bone.ply", "ball", 475, 0.2152),
-    _case("bone.ply", "ball", 1065, 0.2517),
-    _case("bone.ply", "edges", 544, 0.1201, (-0.582, 0.813, 0.01), 0.032),
-    _case("bone.ply", "edges", 1257, 0.3157, (0.002, 0.965, 0.264), 0.06),
-    _case("bone.ply", "edges", 425, 0.4495, (-0.723, -0.633, -0.277), 0.1322),
-    _case("bone.ply", "split", 1203, 0.1011, (0.003, 0.529, 0.849), 0.0178),
-    _case("bone.ply", "split", 1198, 0.3416, (0.013, -0.429, 0.903), 0.0629),
-    _case("bone.ply", "split", 1208, 0.3937, (-0.97, 0.099, 0.223), 0.1527),
+    _case("bone.ply", "ball", 1286, 0.0886),  # 55 vertices
+    _case("bone.ply", "ball", 1037, 0.2907),  # 412 vertices
+    _case("bone.ply", "ball", 570, 0.3158),  # 481 vertices
+    _case("bone.ply", "edges", 942, 0.123, (0.84, 0.213, 0.499), 0.027),  # 65 vertices
+    _case("bone.ply", "edges", 878, 0.3533, (-0.089, 0.203, 0.975), 0.066),  # 535 vertices
+    _case("bone.ply", "edges", 117, 0.3868, (0.712, 0.562, -0.42), 0.1842),  # 394 vertices
+    _case("bone.ply", "split", 836, 0.1424, (0.232, 0.013, 0.973), 0.0235),  # 75 vertices
+    _case("bone.ply", "split", 897, 0.344, (0.425, -0.544, -0.723), 0.0528),  # 454 vertices
+    _case("bone.ply", "split", 652, 0.3948, (0.247, 0.152, -0.957), 0.1664),  # 443 vertices
 )
 
 
