@@ -391,8 +391,8 @@ CORPUS: tuple[CorpusCase, ...] = (
     # along existing edges: the seam runs along the bends of the coarse
     # rounded edges (dihedral angles of 20-40 degrees), a real crease along
     # the cut
-    _case("airplane.obj", "edges", 1921, 0.25, (0.0, 0.0, 1.0), 0.02, creased=True),
-    _case("airplane.obj", "edges", 1920, 0.25, (0.0, 0.0, -1.0), 0.01, creased=True),
+    _case("airplane.obj", "edges", 1921, 0.25, (0.0, 0.0, 1.0), 0.02, creased=True),  # 114
+    _case("airplane.obj", "edges", 1920, 0.15, (0.0, 0.0, -1.0), 0.01, creased=True),  # 69
     # bone.ply: 1,513 used vertices, closed, coarse scan
     _case("bone.ply", "ball", 1286, 0.0886),  # 55 vertices
     _case("bone.ply", "ball", 1037, 0.2907),  # 412 vertices
