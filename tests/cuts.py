@@ -252,7 +252,9 @@ def plane_cut_split(
     (:func:`split_on_plane`); the piece is then the edge-connected part,
     containing ``center_vertex``, of the faces on the piece side whose
     centroid lies within ``radius`` of ``c``. Where the ball rather than the
-    plane bounds the piece, the seam follows existing edges.
+    plane bounds the piece, the seam follows existing edges. The whole mesh
+    is split, as a clip of the whole surface leaves it: the host keeps split
+    triangles along the plane away from the piece too.
 
     Parameters
     ----------
