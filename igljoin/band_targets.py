@@ -122,7 +122,7 @@ def kept_elevation(
     outward = -host.inward
     phi = np.arctan2(np.einsum("ij,ij->i", g, host.normal), np.einsum("ij,ij->i", g, outward))
     # a band fit spans ``reach`` along the seam (less than ``band`` round a tube's end)
-    reach = min(band, along_curve_reach(targets, closed))
+    reach = min(band, along_curve_reach(targets, closed, host.normal, band))
     B, share = _seam_modes(targets, closed, reach)
     # weighted least squares of φ on the modes, each vertex weighing by its share
     # of the seam; neighbouring fits share one band, so count one independent

@@ -47,8 +47,11 @@ _SAME_SHEET_COS = 0.35
 #: Half-width of a band along a closed curve, as a fraction of the curve's radius.
 ALONG_RADIUS_FRACTION = 0.5
 
+#: Fewer band vertices than this and the terms beyond the quadratic are dropped.
+_FULL_MIN = 12
+
 #: Fewer band vertices than this and the quadratic terms are dropped (plane fit).
-_QUADRATIC_MIN = 12
+_QUADRATIC_MIN = 7
 
 
 @dataclass(frozen=True)
@@ -121,28 +124,57 @@ def curve_tangents(P: np.ndarray, closed: bool, span: float) -> np.ndarray:
     return unit(at(hi) - at(lo))
 
 
-def along_curve_reach(P: np.ndarray, closed: bool) -> float:
-    """Half-width of a band fit along its curve: :data:`ALONG_RADIUS_FRACTION` of its radius.
+def along_curve_reach(
+    P: np.ndarray, closed: bool, normals: np.ndarray | None = None, span: float | None = None
+) -> float:
+    """Half-width of a band fit along its curve: where the surface bends round the curve.
 
-    A closed curve of length ``L`` bends like a circle of radius ``L / 2π``; a
-    surface it runs round (a tube's end) bends as much along it, which a
-    quadratic fit over more than about half that radius cannot follow. An
-    open curve is not limited.
+    A surface that turns about the curve's own direction (a tube round its end)
+    cannot be followed by a quadratic fit over more than about half its radius
+    of bending along the curve. That radius is read from the surface normals at
+    the curve: the median angle they turn through per unit of arc length over
+    ``span``; the reach is :data:`ALONG_RADIUS_FRACTION` of its inverse. Without
+    normals, a closed curve's own radius (length / 2π) stands for it.
 
     Parameters
     ----------
     P : ndarray, shape (k, 3)
     closed : bool
+    normals : ndarray, shape (k, 3), optional
+        Unit surface normals at the curve points.
+    span : float, optional
+        Arc length over which the normals' turning is read (default: a tenth of
+        the curve's length).
 
     Returns
     -------
     float
-        ``inf`` for an open curve.
+        ``inf`` where the surface does not bend along the curve (or an open
+        curve without normals).
     """
-    if not closed or len(P) < 3:
+    k = len(P)
+    if k < 3:
         return float("inf")
-    length = float(np.linalg.norm(np.diff(np.vstack([P, P[:1]]), axis=0), axis=1).sum())
-    return ALONG_RADIUS_FRACTION * length / (2.0 * np.pi)
+    Q = np.vstack([P, P[:1]]) if closed else P
+    seg = np.linalg.norm(np.diff(Q, axis=0), axis=1)
+    length = float(seg.sum())
+    if normals is None:
+        return ALONG_RADIUS_FRACTION * length / (2.0 * np.pi) if closed else float("inf")
+    s = np.concatenate([[0.0], np.cumsum(seg)])[:k]
+    span = 0.1 * length if span is None else float(span)
+    ahead = s + span
+    if closed:
+        j = np.searchsorted(s, ahead % length) % k
+        arc = np.where(ahead < length, s[j] - s, s[j] + length - s)
+    else:
+        j = np.minimum(np.searchsorted(s, ahead), k - 1)
+        arc = s[j] - s
+    ok = arc > 0
+    if not ok.any():
+        return float("inf")
+    turn = np.arccos(np.clip(np.einsum("ij,ij->i", normals[ok], normals[j[ok]]), -1.0, 1.0))
+    rate = float(np.median(turn / arc[ok]))
+    return ALONG_RADIUS_FRACTION / rate if rate > 0 else float("inf")
 
 
 def median_edge_near(V: np.ndarray, F: np.ndarray, curve: np.ndarray, rings: int = 2) -> float:
@@ -172,6 +204,36 @@ def median_edge_near(V: np.ndarray, F: np.ndarray, curve: np.ndarray, rings: int
         return 0.0
     L = np.linalg.norm(V[G] - V[np.roll(G, -1, axis=1)], axis=2)
     return float(np.median(L))
+
+
+def _orientation_side(F: np.ndarray, curve: np.ndarray, closed: bool) -> np.ndarray:
+    """+1 where the curve runs along its faces' half-edges, −1 against them, 0 unknown.
+
+    Per curve vertex, from the mesh edge to the next curve vertex (the previous
+    one at the end of an open curve); a vertex without such an edge takes the
+    curve's majority, and 0 where no curve edge is a mesh edge at all.
+    """
+    k = len(curve)
+    side = np.zeros(k)
+    if k < 2 or not len(F):
+        return side
+    n = int(max(F.max(), curve.max())) + 1
+    start = F.reshape(-1)
+    end = F[:, [1, 2, 0]].reshape(-1)
+    forward = set((start * n + end).tolist())
+    nxt = np.roll(np.arange(k), -1)
+    if not closed:
+        nxt[-1] = k - 2
+    a, b = curve, curve[nxt]
+    along = np.fromiter(((x * n + y) in forward for x, y in zip(a, b)), dtype=bool, count=k)
+    against = np.fromiter(((y * n + x) in forward for x, y in zip(a, b)), dtype=bool, count=k)
+    if not closed:
+        along[-1], against[-1] = against[-1], along[-1]  # the last edge is walked backwards
+    side[along & ~against] = 1.0
+    side[against & ~along] = -1.0
+    if (side == 0).any() and (side != 0).any():
+        side[side == 0] = 1.0 if (side > 0).sum() >= (side < 0).sum() else -1.0
+    return side
 
 
 def _near_vertices(V: np.ndarray, F: np.ndarray, curve: np.ndarray, limit: float) -> np.ndarray:
@@ -255,9 +317,14 @@ def band_fit(
     w_area = np.where(valid, 1.0, 0.0)
     n0 = unit(np.einsum("km,kmj->kj", w_area, VN[idx]) + n0)
     g0 = unit(np.cross(n0, T))
-    side = np.einsum("km,kmj,kj->k", w_area, D, g0)
+    # into the surface: the faces lie to the left of their own boundary edges (seen
+    # along the normal), so the curve's order against theirs fixes the side exactly;
+    # where no curve edge is a mesh edge, the band's centroid decides
+    side = _orientation_side(F, curve, closed)
+    unknown = side == 0
+    side[unknown] = np.sign(np.einsum("km,kmj,kj->k", w_area, D, g0))[unknown]
     g0[side < 0] *= -1.0
-    along = min(band, along_curve_reach(P, closed))
+    along = min(band, along_curve_reach(P, closed, n0, band))
     u = np.einsum("kmj,kj->km", D, T) / band
     v = np.einsum("kmj,kj->km", D, g0) / band
     # an ellipsoid: ``along`` wide in the curve's direction, ``band`` across it and
@@ -302,11 +369,10 @@ def _slope_error(Z, X, D, normal, band: float, used: np.ndarray) -> np.ndarray:
     """
     z = np.einsum("kmj,kj->km", D, normal)
     coef = np.einsum("kim,km->ki", Z, z)
-    quad = used >= _QUADRATIC_MIN
     fitted = np.einsum("kmi,ki->km", X, coef)
     present = np.abs(Z).sum(axis=1) > 0
     r = np.where(present, z - fitted, 0.0)
-    dof = used - np.where(quad, X.shape[2], 2)
+    dof = used - _parameters(used)
     sigma2 = (r * r).sum(axis=1) / np.maximum(dof, 1)
     se = np.sqrt(sigma2 * (Z[:, 1, :] ** 2).sum(axis=1)) / band
     return np.where(dof > 0, se, 0.0)
@@ -329,8 +395,21 @@ def _fit_rows(u: np.ndarray, v: np.ndarray, w: np.ndarray, used: np.ndarray) -> 
 
 
 def _columns(u: np.ndarray, v: np.ndarray, used: np.ndarray) -> np.ndarray:
-    """Design columns ``[u, v, u², uv, v²]`` (k, M, 5); plane fit where a band is small."""
+    """Design columns (k, M, 8) of the fit, fewer where a band has few vertices.
+
+    ``[u, v, u², uv, v², u³, u⁴, u²v]``: a quadratic, and how the surface bends
+    along the curve beyond it (round a tube). Bands with fewer than
+    :data:`_FULL_MIN` vertices drop the last three, with fewer than
+    :data:`_QUADRATIC_MIN` the quadratic too (a plane: biased on a curved surface,
+    so the last resort); dropped columns are zero.
+    """
     uu = u * u
     X = np.stack([u, v, uu, u * v, v * v, uu * u, uu * uu, uu * v], axis=2)
+    X[used < _FULL_MIN, :, 5:] = 0.0
     X[used < _QUADRATIC_MIN, :, 2:] = 0.0
     return X
+
+
+def _parameters(used: np.ndarray) -> np.ndarray:
+    """Number of fitted columns at each curve vertex (see :func:`_columns`)."""
+    return np.where(used >= _FULL_MIN, 8, np.where(used >= _QUADRATIC_MIN, 5, 2))
