@@ -388,3 +388,25 @@ def test_viewer_panel_lists_the_warnings(viz, oversized, clean):
         assert session.warnings() == ["no quality warnings"]
     finally:
         session.close()
+
+
+# --------------------------------------------------------------------------- the docs
+
+
+def test_docs_list_every_code_with_its_threshold():
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "warnings.md").read_text("utf-8")
+    for code in (*CODES, "no_snapshot"):
+        assert f"| `{code}` |" in page, code
+    for name in (
+        "CREASE_MAX_DEG",
+        "HOST_CREASE_DEG",
+        "AREA_RATIO_FACE_LIMIT",
+        "AREA_RATIO_TOTAL_LIMIT",
+        "SEAM_SLIVER_FRACTION",
+        "SEAM_UNEVEN_RATIO",
+    ):
+        value = getattr(quality, name)
+        unit = "°" if name.endswith("_DEG") else ""
+        assert f"| `{name}` | {value:g}{unit} |" in page, name
