@@ -161,6 +161,9 @@ def test_summary_rows(local_run, cases):
         # measured 0.0 to 0.97 degrees; a crease of a few degrees would be a failed smooth join
         assert float(r["crease_mean"]) < 2.0
         assert float(r["time_seconds"]) > 0
+        # the warnings column holds the codes of the report's warnings: none on these joins
+        report = json.loads((out / name / "report.json").read_text())
+        assert r["warnings"] == ";".join(w["code"] for w in report["warnings"]) == ""
     assert by_name["partial_patch-coarse"]["resampled"] == "True"
     assert by_name["partial_patch-equal"]["resampled"] == "False"
     sample = igljoin.phantoms.paper_sample("end_to_end", "equal", resolution=0.4)
@@ -168,6 +171,7 @@ def test_summary_rows(local_run, cases):
     assert int(row["host_vertices"]) == sample.host.n_vertices
     doc = json.loads((out / "summary.json").read_text())
     assert doc["failed_cases"] == BAD and len(doc["rows"]) == N_CASES
+    assert doc["warned"] == 0 and doc["warned_cases"] == []
 
 
 def test_good_cases_outputs_are_complete(local_run, cases):
