@@ -348,8 +348,8 @@ def assess(result: Any) -> tuple[QualityWarning, ...]:
             QualityWarning(
                 "weld_failed",
                 f"host and guest could not be welded into one mesh ({weld.get('error', '')}); "
-                "no merged mesh and no self-intersection count: save with merged=False and "
-                "inspect the seam, or clean the meshes (igljoin clean) and join again",
+                "so there is no merged mesh and no self-intersection count: follow the weld "
+                "error's advice, or save with merged=False to keep the guest and the report",
             )
         )
     pairs = _number(m, "self_intersections", "pairs")

@@ -5,9 +5,10 @@ bad join is built for one fault: the paper's "without smooth join" variant
 (a crease), a patch twice the size of its hole (folds, self-intersections,
 gross area change), a solve cut short (not converged), a patch whose seam
 has a sliver or very uneven segments (made by splitting seam edges of the
-paper's patch). Faults no sample has yet (a host creased along the seam, a
-weld that fails, a total area change alone) are results whose metrics are
-set, tested through :func:`igljoin.quality.assess`. Then every place a
+paper's patch). A weld that fails is a re-solve with its seam targets
+moved off the host curve. Faults no sample has yet (a host creased along the
+seam, a total area change alone) are results whose metrics are set, tested
+through :func:`igljoin.quality.assess`. Then every place a
 result is shown carries the warnings: ``report()``, ``report.json``,
 ``summary.csv``/``summary.json``, ``igljoin join``/``batch``/``render`` and
 the viewer's panel and pictures.
@@ -110,6 +111,14 @@ def cut_short(patch):
 
 
 @pytest.fixture(scope="module")
+def off_seam(patch):
+    """The patch re-solved with its seam targets moved off the host curve: it cannot be welded."""
+    solver = igljoin.JoinSolver(patch.host, patch.guest, patch.host_curve, None)
+    first = solver.solve()
+    return solver.solve(targets=first.seam_targets + [0.0, 0.0, 0.25])
+
+
+@pytest.fixture(scope="module")
 def sliver(patch):
     """The patch with one seam edge split 3 % from its end, as a plane clip leaves it."""
     guest = _split_seam_edges(patch.guest, {(0, 1): [0.03]})
@@ -126,7 +135,21 @@ def uneven(patch):
 
 
 @pytest.fixture(scope="module")
-def triggered(clean, oversized, unsmoothed, cut_short, sliver, uneven):
+def bunny_cut():
+    """A piece cut out of the real bunny (the first clean cut of tests/test_ground_truth.py)."""
+    from .cuts import cut_piece, sample_mesh_dir
+
+    bunny = igljoin.read_mesh(sample_mesh_dir() / "bunny.obj")
+    rng = np.random.default_rng(1)
+    size = float(np.linalg.norm(np.ptp(bunny.V, axis=0)))
+    while True:
+        cut = cut_piece(bunny, int(rng.integers(bunny.n_vertices)), size * rng.uniform(0.05, 0.2))
+        if cut is not None:
+            return cut
+
+
+@pytest.fixture(scope="module")
+def triggered(clean, oversized, unsmoothed, cut_short, off_seam, sliver, uneven):
     """Per code, a result that must carry it."""
     base = clean["partial_patch/equal"]
     return {
@@ -137,11 +160,7 @@ def triggered(clean, oversized, unsmoothed, cut_short, sliver, uneven):
             base, input_crease_deg={"mean": 12.0, "max": 25.0, "min": 1.0}
         ),
         "folds": oversized,
-        "weld_failed": _with_metrics(
-            base,
-            weld={"ok": False, "error": "an edge would be shared by three faces"},
-            self_intersections=None,
-        ),
+        "weld_failed": off_seam,
         "self_intersections": oversized,
         "area_change": oversized,
         "seam_slivers": sliver,
@@ -187,7 +206,7 @@ def test_the_codes_come_in_their_documented_order(oversized):
     assert {"folds", "self_intersections", "area_change"} <= set(codes)
 
 
-def test_the_figures_behind_the_faults(oversized, unsmoothed, cut_short, sliver, uneven):
+def test_the_figures_behind_the_faults(oversized, unsmoothed, cut_short, off_seam, sliver, uneven):
     m = oversized.metrics
     assert m["folded_pairs"] > 0 and m["self_intersections"]["pairs"] > 0
     assert m["area_ratio"]["min"] < 1 / quality.AREA_RATIO_FACE_LIMIT
@@ -195,6 +214,11 @@ def test_the_figures_behind_the_faults(oversized, unsmoothed, cut_short, sliver,
     assert not cut_short.converged and cut_short.iterations == 3
     w = {x.code: x for x in cut_short.warnings}["not_converged"]
     assert w.value == 3 and w.threshold == 3 and "max_iterations" in w.message
+    assert (
+        off_seam.metrics["weld"]["ok"] is False and off_seam.metrics["self_intersections"] is None
+    )
+    w = {x.code: x for x in off_seam.warnings}["weld_failed"]
+    assert off_seam.metrics["weld"]["error"] in w.message  # the weld's own advice is kept
     # the split joins themselves are sound: only the seam warning is raised
     assert _codes(sliver) == ["seam_slivers"]
     assert _codes(uneven) == ["seam_uneven"]
@@ -202,6 +226,21 @@ def test_the_figures_behind_the_faults(oversized, unsmoothed, cut_short, sliver,
     # 0.03 of one segment over a median of one whole segment: 3 % (the inserted host points
     # are not the input's and are left out, else they would make slivers of their own)
     assert w.value == pytest.approx(0.03, rel=0.05)  # 5 %: the patch's edges vary a little
+
+
+def test_a_sliver_on_a_real_cut_warns_and_the_uncut_seam_does_not(bunny_cut):
+    cut = bunny_cut
+    loop = igljoin.boundary_loops(cut.piece.F)[0]
+    split = _split_seam_edges(cut.piece, {(int(loop[0]), int(loop[1])): [0.02]})
+    plain = igljoin.join(cut.host, cut.piece, cut.host_curve, None)
+    slivered = igljoin.join(cut.host, split, cut.host_curve, None)
+    assert "seam_slivers" not in _codes(plain)
+    w = {x.code: x for x in slivered.warnings}["seam_slivers"]
+    assert w.value < quality.SEAM_SLIVER_FRACTION and "guest seam" in w.message
+    # the bunny's own seam is even: its shortest segment is 0.7 of the median (measured)
+    assert min(quality.segment_lengths(cut.host.V[cut.host_curve], True)) > 0.5 * np.median(
+        quality.segment_lengths(cut.host.V[cut.host_curve], True)
+    )
 
 
 def test_a_total_area_change_alone_warns(clean):
@@ -295,6 +334,14 @@ def test_cli_join_prints_each_warning(cases, tmp_path, oversized):
     doc = json.loads(proc.stdout)
     assert [w["code"] for w in doc["warnings"]] == _codes(oversized)
     assert doc["summary"]["warnings"] == ";".join(_codes(oversized))
+
+
+def test_cli_render_prints_the_warnings(cases, tmp_path, oversized):
+    pytest.importorskip("polyscope")
+    proc = run("render", cases / "oversized", "-o", tmp_path / "o.png", "--size", "400", "300")
+    assert proc.returncode == 0, proc.stderr
+    assert f"warnings: {len(oversized.warnings)} (see docs/warnings.md)" in proc.stdout
+    assert all(f"    {w.code}: {w.message}" in proc.stdout for w in oversized.warnings)
 
 
 def test_cli_batch_summary_csv_and_json_carry_the_warnings(cases, tmp_path, oversized):
