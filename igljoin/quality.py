@@ -29,6 +29,7 @@ __all__ = [
     "SEAM_UNEVEN_RATIO",
     "QualityWarning",
     "assess",
+    "curve_warnings",
     "segment_lengths",
 ]
 
@@ -181,9 +182,30 @@ def _curves(result: Any) -> list[tuple[str, np.ndarray]]:
     return out
 
 
-def _seam_warnings(result: Any) -> list[QualityWarning]:
+def curve_warnings(curves) -> list[QualityWarning]:
+    """``seam_slivers`` and ``seam_uneven`` warnings of some curves (at most one of each).
+
+    Parameters
+    ----------
+    curves : iterable of (str, ndarray of shape (k,))
+        Each curve's name (used in the message, e.g. ``"host curve"``) and
+        its segment lengths (:func:`segment_lengths`). Curves of fewer than
+        three segments are skipped.
+
+    Returns
+    -------
+    list of QualityWarning
+        The worst sliver over all curves, then the worst uneven curve.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> [w.code for w in curve_warnings([("host curve", np.array([1.0, 1, 1, 0.01]))])]
+    ['seam_slivers']
+    """
     worst_sliver, worst_uneven = None, None
-    for name, lengths in _curves(result):
+    for name, lengths in curves:
+        lengths = np.asarray(lengths, dtype=np.float64)
         lengths = lengths[np.isfinite(lengths)]
         if len(lengths) < 3:
             continue
@@ -370,5 +392,5 @@ def assess(result: Any) -> tuple[QualityWarning, ...]:
     area = _area_warning(m)
     if area is not None:
         out.append(area)
-    out.extend(_seam_warnings(result))
+    out.extend(curve_warnings(_curves(result)))
     return tuple(out)

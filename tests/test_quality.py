@@ -244,6 +244,32 @@ def test_a_sliver_on_a_real_cut_warns_and_the_uncut_seam_does_not(bunny_cut):
     )
 
 
+@pytest.mark.parametrize("name", ["cow.obj", "airplane.obj", "bunny10k_textured.obj"])
+def test_real_cuts_along_mesh_edges_have_no_seam_warning(name):
+    """Cuts of real meshes along their own edges: even enough (no sliver, not uneven)."""
+    from .cuts import cut_piece, sample_mesh_dir
+
+    mesh = igljoin.read_mesh(sample_mesh_dir() / name)
+    rng = np.random.default_rng(3)
+    size = float(np.linalg.norm(np.ptp(mesh.V, axis=0)))
+    found = 0
+    for _ in range(300):
+        cut = cut_piece(mesh, int(rng.integers(mesh.n_vertices)), size * rng.uniform(0.05, 0.25))
+        if cut is None:
+            continue
+        loop = igljoin.boundary_loops(cut.piece.F)[0]
+        curves = [
+            ("host curve", quality.segment_lengths(cut.host.V[cut.host_curve], True)),
+            ("guest seam", quality.segment_lengths(cut.piece.V[loop], True)),
+        ]
+        # measured: shortest 0.30 to 0.86 of the median, longest 1.2 to 3.4 times it
+        assert quality.curve_warnings(curves) == [], (name, cut.piece.n_vertices)
+        found += 1
+        if found == 5:
+            break
+    assert found == 5
+
+
 def test_a_total_area_change_alone_warns(clean):
     base = clean["partial_patch/equal"]
     grown = _with_metrics(base, area_ratio={"min": 0.9, "mean": 2.4, "max": 3.5, "total": 2.5})
