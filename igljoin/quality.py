@@ -301,11 +301,16 @@ def assess(result: Any) -> tuple[QualityWarning, ...]:
 
     Examples
     --------
+    Without the smooth-join term the end-to-end sample meets its host at a
+    kink:
+
     >>> import igljoin
-    >>> s = igljoin.phantoms.paper_sample("partial_patch", "equal", resolution=0.5)
-    >>> res = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve)
-    >>> assess(res)
-    ()
+    >>> s = igljoin.phantoms.paper_sample("end_to_end", "equal", resolution=0.5)
+    >>> res = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve, smooth=False)
+    >>> [w.code for w in assess(res) if w.code == "crease"]
+    ['crease']
+    >>> res.warnings == assess(res)  # the result keeps its own
+    True
     """
     m = result.metrics or {}
     out: list[QualityWarning] = []
