@@ -537,6 +537,29 @@ def _row_lines(row: dict) -> list[str]:
     ]
 
 
+def _warning_lines(warnings: list) -> list[str]:
+    """The quality warnings of a join, one line each (``docs/warnings.md``), or "none"."""
+    if not warnings:
+        return ["  warnings: none"]
+    lines = [f"  warnings: {len(warnings)} (see docs/warnings.md)"]
+    for w in warnings:
+        if isinstance(w, dict):
+            lines.append(f"    {w.get('code')}: {w.get('message')}")
+        else:  # a QualityWarning
+            lines.append(f"    {w.code}: {w.message}")
+    return lines
+
+
+def _report_warnings(folder: Path) -> list:
+    """``report["warnings"]`` of a case output folder (empty if unreadable)."""
+    try:
+        report = json.loads((folder / "report.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return []
+    found = report.get("warnings") if isinstance(report, dict) else None
+    return found if isinstance(found, list) else []
+
+
 def _viz():
     try:
         from . import viz
@@ -632,13 +655,13 @@ def _cmd_join(parser, args) -> int:
     from .outputs import MANIFEST, read_manifest
 
     files = sorted(set(read_manifest(args.out)) - {MANIFEST})  # igljoin's files only
+    warnings = _report_warnings(args.out)
     if args.json:
-        _print_json({"out": args.out, "files": files, "summary": row})
+        _print_json({"out": args.out, "files": files, "summary": row, "warnings": warnings})
         return 0
     print(f"joined {args.guest} to {args.host} -> {args.out}")
     print("\n".join(_row_lines(row)))
-    if row.get("warnings"):
-        print(f"  warning: {row['warnings']}")
+    print("\n".join(_warning_lines(warnings)))
     print(f"  wrote {', '.join(files)}")
     return 0
 
@@ -662,12 +685,19 @@ def _cmd_batch(parser, args) -> int:
     else:
         skipped = f", {len(summary.skipped)} up to date (skipped)" if summary.skipped else ""
         print(
-            f"{summary.n_cases} cases: {summary.n_cases - len(summary.failed)} ok, "
-            f"{len(summary.failed)} failed{skipped}; {summary.seconds:.1f} s"
+            f"{summary.n_cases} cases: {summary.n_cases - len(summary.failed)} ok "
+            f"({len(summary.warned)} with warnings), {len(summary.failed)} failed{skipped}; "
+            f"{summary.seconds:.1f} s"
         )
         for row in summary.rows:
             if row["status"] != "ok":
                 print(f"  {row['name']}: failed at {row['step']}: {row['error_message']}")
+            elif row.get("warnings"):
+                codes = row["warnings"].split(";")
+                many = "s" if len(codes) != 1 else ""
+                print(f"  {row['name']}: ok, {len(codes)} warning{many}: {', '.join(codes)}")
+        if summary.warned:
+            print("  (each case's report.json says what the warnings mean; see docs/warnings.md)")
         if summary.files:
             print(f"summary: {summary.files['summary_csv']}")
     if summary.summary_error is not None:
@@ -687,7 +717,7 @@ def _cmd_batch(parser, args) -> int:
         if args.json:
             return 1
         for row in summary.rows:
-            if row["status"] == "ok":
+            if row["status"] == "ok" and not row.get("warnings"):
                 print(f"  {row['name']}: ok")
     if not summary.ok or summary.summary_error is not None:
         print(f"{PROG}: {summary.message()}", file=sys.stderr)
@@ -825,6 +855,7 @@ def _cmd_render(parser, args) -> int:
         kwargs["size"] = tuple(args.size)
     path = viz.render(solved.result, args.out, **kwargs)
     print(f"rendered {solved.spec.name} -> {path}")
+    print("\n".join(_warning_lines(list(solved.result.warnings))))
     return 0
 
 

@@ -93,6 +93,7 @@ __all__ = [
     "required_outputs",
     "run_case",
     "solve_case",
+    "warning_codes",
     "write_summary",
 ]
 
@@ -250,7 +251,15 @@ def _snapshot(result, path: Path, title: str, warnings: list) -> None:
     try:
         from . import viz
     except ImportError as exc:
-        warnings.append(f"no snapshot: igljoin.viz is not available ({exc})")
+        warnings.append(
+            {
+                "code": "no_snapshot",
+                "message": f"no snapshot: igljoin.viz is not available ({exc}); install the "
+                "viz extra: pip install 'igljoin[viz]'",
+                "value": None,
+                "threshold": None,
+            }
+        )
         return
     viz.render(result, path, title=title)
 
@@ -342,10 +351,11 @@ def _write_outputs(
     timings = dict(solved.timings)
     t = time.perf_counter()
     step.name = "save"
-    warnings: list[str] = []
     # a WeldError fails the case at step "save": merged.ply is required
     paths = result.save(tmp, formats=formats)
     report = json.loads(paths["report"].read_text(encoding="utf-8"))
+    # the join's quality warnings, then the batch's own (e.g. no snapshot)
+    warnings: list[dict] = list(report.get("warnings") or [])
     timings["solver"] = report.pop("timings", {})
     metrics = report.get("metrics", {})
     if "time_seconds" in metrics:
@@ -583,6 +593,24 @@ def _cleanup_total(cleanup: dict | None) -> int | None:
     return sum(int(_get(rep, "total") or 0) for rep in cleanup.values())
 
 
+def warning_codes(report: dict | None) -> list[str]:
+    """The warning codes of a case's ``report.json`` (see ``docs/warnings.md``), in order.
+
+    Each entry of ``report["warnings"]`` is ``{"code", "message", "value",
+    "threshold"}``; a plain string (reports of older versions) counts as its
+    own code.
+    """
+    found = _get(report, "warnings") if isinstance(report, dict) else None
+    if not isinstance(found, list):
+        return []
+    codes = []
+    for w in found:
+        code = w.get("code") if isinstance(w, dict) else w
+        if isinstance(code, str) and code:
+            codes.append(code)
+    return codes
+
+
 def case_row(folder: str | os.PathLike, *, name: str | None = None) -> dict:
     """The summary row of a case output folder (read from its files).
 
@@ -631,7 +659,7 @@ def case_row(folder: str | os.PathLike, *, name: str | None = None) -> dict:
             area_ratio_max=_get(m, "area_ratio", "max"),
             cleanup_fixes=_cleanup_total(report.get("cleanup")),
             resampled=report.get("resample") is not None,
-            warnings="; ".join(report.get("warnings") or []) or None,
+            warnings=";".join(warning_codes(report)) or None,
         )
     elif error is not None:
         row.update(
@@ -664,12 +692,15 @@ def write_summary(out_dir: str | os.PathLike, rows: list[dict]) -> tuple[Path, P
     for r in rows:
         writer.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in ROW_FIELDS})
     failed = [r["name"] for r in rows if r["status"] != "ok"]
+    warned = [r["name"] for r in rows if r["status"] == "ok" and r.get("warnings")]
     doc = {
         "igljoin_version": __version__,
         "cases": len(rows),
         "ok": len(rows) - len(failed),
         "failed": len(failed),
         "failed_cases": failed,
+        "warned": len(warned),
+        "warned_cases": warned,
         "rows": rows,
     }
     tmp = make_staging(out)
@@ -728,17 +759,29 @@ class BatchSummary:
         return [r["name"] for r in self.rows if r["status"] != "ok"]
 
     @property
+    def warned(self) -> list[str]:
+        """Names of the cases that succeeded with quality warnings (see ``docs/warnings.md``)."""
+        return [r["name"] for r in self.rows if r["status"] == "ok" and r.get("warnings")]
+
+    @property
     def ok(self) -> bool:
-        """True if every case succeeded."""
+        """True if every case succeeded (with or without warnings)."""
         return not self.failed
 
     def message(self) -> str:
-        """One line: ``"3 of 10 cases failed: a, b, c"`` or ``"all 10 cases ok"``."""
-        n, bad = self.n_cases, self.failed
+        """One line: ``"3 of 10 cases failed: a, b, c"`` or ``"all 10 cases ok"``.
+
+        Cases with quality warnings are named after it: ``"all 10 cases ok;
+        2 with warnings: d, e"``.
+        """
+        n, bad, warned = self.n_cases, self.failed, self.warned
         if not bad:
-            return f"all {n} cases ok" if n != 1 else "the case is ok"
-        shown = ", ".join(bad[:10]) + (", ..." if len(bad) > 10 else "")
-        return f"{len(bad)} of {n} cases failed: {shown}"
+            text = f"all {n} cases ok" if n != 1 else "the case is ok"
+        else:
+            text = f"{len(bad)} of {n} cases failed: {_names(bad)}"
+        if warned:
+            text += f"; {len(warned)} with warnings: {_names(warned)}"
+        return text
 
     def to_json(self) -> dict:
         """Plain-JSON form."""
@@ -747,6 +790,8 @@ class BatchSummary:
             "cases": self.n_cases,
             "failed": len(self.failed),
             "failed_cases": self.failed,
+            "warned": len(self.warned),
+            "warned_cases": self.warned,
             "ran": list(self.ran),
             "skipped": list(self.skipped),
             "seconds": self.seconds,
@@ -758,6 +803,10 @@ class BatchSummary:
 
 
 # --------------------------------------------------------------------------- resume
+
+
+def _names(names: list[str], shown: int = 10) -> str:
+    return ", ".join(names[:shown]) + (", ..." if len(names) > shown else "")
 
 
 def _json_round_trip(data: Any) -> Any:

@@ -17,6 +17,7 @@ from .io import DEFAULT_OUTPUT_FORMATS, output_formats, write_mesh
 from .mesh import Mesh
 from .metrics import SELF_INTERSECTION_RINGS, ring_band, self_intersections
 from .options import JoinOptions
+from .quality import QualityWarning, assess
 from .weld import Welded, weld
 
 __all__ = ["JoinResult", "JoinedSeam", "plain_json"]
@@ -178,6 +179,10 @@ class JoinResult:
     merged : Welded
         Host and deformed guest welded into one mesh (computed on first use,
         then kept; see :func:`igljoin.weld.weld`).
+    warnings : tuple of QualityWarning
+        What is wrong with the join, if anything (computed on first use, then
+        kept; see :func:`igljoin.quality.assess` and ``docs/warnings.md``).
+        Empty for a clean join.
     """
 
     host: Mesh
@@ -202,6 +207,7 @@ class JoinResult:
     seams: list = field(default_factory=list)
     host_offsets: np.ndarray | None = None
     _merged: Welded | None = field(default=None, init=False, repr=False, compare=False)
+    _warnings: tuple | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def merged(self) -> Welded:
@@ -220,6 +226,17 @@ class JoinResult:
     def guest_at_host(self) -> np.ndarray:
         """Guest vertex lying on each host curve vertex, shape (k,)."""
         return self.seam[self.correspondence.host_hit]
+
+    @property
+    def warnings(self) -> tuple[QualityWarning, ...]:
+        """The join's quality warnings (cached; empty for a clean join).
+
+        See :func:`igljoin.quality.assess`; ``docs/warnings.md`` lists the
+        codes, their thresholds and what to do.
+        """
+        if self._warnings is None:
+            self._warnings = assess(self)
+        return self._warnings
 
     def measure_weld(self, rings: int = SELF_INTERSECTION_RINGS) -> dict:
         """Weld (kept as :attr:`merged`) and count self-intersections near the seam.
@@ -264,13 +281,16 @@ class JoinResult:
         }
 
     def report(self) -> dict:
-        """Plain-JSON summary of the join (counts, timings, convergence, metrics, options).
+        """Plain-JSON summary of the join: warnings, counts, timings, convergence, metrics, options.
 
         ``json.dumps(result.report())`` always works: numpy values are
-        converted and non-finite numbers become ``null``.
+        converted and non-finite numbers become ``null``. ``"warnings"`` is
+        the list of :attr:`warnings` as ``{"code", "message", "value",
+        "threshold"}`` (empty for a clean join).
         """
         return plain_json(
             {
+                "warnings": [w.to_json() for w in self.warnings],
                 "closed": bool(self.closed),
                 "converged": bool(self.converged),
                 "stop_reason": self.stop_reason,

@@ -714,6 +714,10 @@ def _table() -> str:
         "none crashes, hangs or returns NaN. All of these are `ValueError` subclasses "
         "(`igljoin.IgljoinError`) except a missing file (`FileNotFoundError`). This table "
         "is generated from the test corpus in `tests/test_bad_input.py`.\n\n"
+        "A join that runs but should not be trusted as it is raises no error: its result "
+        "carries [quality warnings](warnings.md) instead (a crease, folds, self-intersections, "
+        "a gross area change, no convergence, slivers on the seam), each with its threshold "
+        "and what to do.\n\n"
         "| input | error | message |\n|---|---|---|\n" + "\n".join(rows) + "\n"
     )
 

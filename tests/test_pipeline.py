@@ -128,9 +128,9 @@ def local_run(cases, input_hashes, tmp_path_factory):
 def test_batch_exit_code_counts_the_failures(local_run):
     proc, out = local_run
     assert proc.returncode == 1
-    assert proc.stderr.strip().splitlines()[-1] == (
-        "igljoin: 2 of 11 cases failed: bad-mesh, bad-outside"
-    )
+    last = proc.stderr.strip().splitlines()[-1]
+    # then "; N with warnings: ..." if some cases have quality warnings
+    assert last.split(";")[0] == "igljoin: 2 of 11 cases failed: bad-mesh, bad-outside"
     assert "Traceback" not in proc.stderr
     doc = json.loads(proc.stdout)  # --json: nothing else on stdout
     assert doc["cases"] == N_CASES and doc["failed_cases"] == BAD
@@ -161,6 +161,11 @@ def test_summary_rows(local_run, cases):
         # measured 0.0 to 0.97 degrees; a crease of a few degrees would be a failed smooth join
         assert float(r["crease_mean"]) < 2.0
         assert float(r["time_seconds"]) > 0
+        # the warnings column holds the codes of the report's warnings (docs/warnings.md)
+        report = json.loads((out / name / "report.json").read_text())
+        assert r["warnings"] == ";".join(w["code"] for w in report["warnings"])
+        # none is about the join itself (host_creased reports the inputs' own crease)
+        assert set(filter(None, r["warnings"].split(";"))) <= {"host_creased"}
     assert by_name["partial_patch-coarse"]["resampled"] == "True"
     assert by_name["partial_patch-equal"]["resampled"] == "False"
     sample = igljoin.phantoms.paper_sample("end_to_end", "equal", resolution=0.4)
@@ -168,6 +173,8 @@ def test_summary_rows(local_run, cases):
     assert int(row["host_vertices"]) == sample.host.n_vertices
     doc = json.loads((out / "summary.json").read_text())
     assert doc["failed_cases"] == BAD and len(doc["rows"]) == N_CASES
+    warned = [r["name"] for r in rows if r["status"] == "ok" and r["warnings"]]
+    assert doc["warned"] == len(warned) and doc["warned_cases"] == warned
 
 
 def test_good_cases_outputs_are_complete(local_run, cases):

@@ -274,9 +274,11 @@ def _captions(run: Any) -> list[str]:
     # ASCII and the degree sign only: Pillow's built-in font has no en dash and no times sign
     def joined(res: Any) -> str:
         r = res.area_ratio
+        codes = [w.code for w in getattr(res, "warnings", ())]
         return (
             f"mean crease {res.crease.mean():.2f}\u00b0, area ratio "
             f"{np.nanmin(r):.2f} to {np.nanmax(r):.2f}"
+            + (f"; warnings: {', '.join(codes)}" if codes else "")
         )
 
     return [

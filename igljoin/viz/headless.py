@@ -25,7 +25,7 @@ from ..errors import OptionsError
 from . import colors
 from ._backend import ensure_init, pillow
 from .camera import Camera, frame_camera
-from .overlay import MIN_SIZE, compose, figures_line, layout
+from .overlay import MIN_SIZE, compose, figures_line, layout, warnings_line
 from .scene import Scene, hidden_scenes
 
 __all__ = ["Panel", "Picture", "picture", "render", "render_meshes"]
@@ -73,12 +73,16 @@ class Picture:
     panels : list of Panel
     title, subtitle : str
         The title line and the figures line.
+    warnings : str
+        The quality warnings drawn after the title
+        (:func:`igljoin.viz.overlay.warnings_line`).
     """
 
     image: Any
     panels: list[Panel] = field(default_factory=list)
     title: str = ""
     subtitle: str = ""
+    warnings: str = ""
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the picture as PNG, atomically. Returns the path."""
@@ -274,7 +278,10 @@ def picture(
     title: str | None = None,
     limit: float = colors.AREA_RATIO_LIMIT,
 ) -> Picture:
-    """Render a join off-screen and composite its title and colour bar.
+    """Render a join off-screen and composite its title, quality warnings and colour bar.
+
+    The title line ends with the result's quality warnings (their codes, in
+    orange) or "no quality warnings" (see ``docs/warnings.md``).
 
     Parameters
     ----------
@@ -307,6 +314,7 @@ def picture(
     ratio = result.metrics.get("area_ratio", {})
     text = title if title is not None else default_title(result)
     sub = figures_line(result)
+    notice = warnings_line(result)
     image = compose(
         shots,
         lay,
@@ -316,8 +324,10 @@ def picture(
         limit=float(limit),
         data_range=(ratio.get("min"), ratio.get("max")),
         background=background,
+        notice=notice,
+        alert=bool(getattr(result, "warnings", ())),
     )
-    return Picture(image=image, panels=panels, title=text, subtitle=sub)
+    return Picture(image=image, panels=panels, title=text, subtitle=sub, warnings=notice)
 
 
 def render(

@@ -16,13 +16,24 @@ import numpy as np
 from . import colors
 from ._backend import pillow
 
-__all__ = ["Layout", "colour_bar", "compose", "figures_line", "fonts", "layout", "legend"]
+__all__ = [
+    "Layout",
+    "colour_bar",
+    "compose",
+    "figures_line",
+    "fonts",
+    "layout",
+    "legend",
+    "warnings_line",
+]
 
 #: Minimum picture size (width, height) that leaves room for the title and the colour bar.
 MIN_SIZE = (320, 240)
 
 _TEXT = (235, 235, 235)
 _DIM = (170, 172, 178)
+#: Colour of the warnings notice of a result that has quality warnings.
+WARNING_COLOR = (255, 170, 60)
 
 
 @dataclass(frozen=True)
@@ -110,6 +121,18 @@ def figures_line(result: Any) -> str:
         f"{result.iterations} iterations{'' if result.converged else ' (not converged)'}",
     ]
     return "   \u00b7   ".join(parts)
+
+
+def warnings_line(result: Any) -> str:
+    """The result's quality warnings on one line: ``"no quality warnings"`` or their codes.
+
+    Examples: ``"2 quality warnings: crease, folds"`` (``docs/warnings.md``
+    says what each means; the report carries the messages).
+    """
+    codes = [w.code for w in getattr(result, "warnings", ())]
+    if not codes:
+        return "no quality warnings"
+    return f"{len(codes)} quality warning{'s' if len(codes) != 1 else ''}: {', '.join(codes)}"
 
 
 def _clipped(data_range: tuple, limit: float) -> tuple[float | None, float | None]:
@@ -272,6 +295,8 @@ def compose(
     data_range: tuple,
     background: tuple | None = None,
     seam_legend: bool = True,
+    notice: str = "",
+    alert: bool = False,
 ) -> Any:
     """Place rendered RGB views on a canvas with the title band, colour bar and legend.
 
@@ -294,6 +319,11 @@ def compose(
     seam_legend : bool
         Explain the seam and its tangent ticks (:data:`SEAM_LEGEND`) under
         the colour bar, where the column has room for it.
+    notice : str
+        Drawn on the title line after the title (the quality warnings,
+        :func:`warnings_line`); "" for none.
+    alert : bool
+        Draw ``notice`` in :data:`WARNING_COLOR` instead of dim text.
 
     Returns
     -------
@@ -309,6 +339,9 @@ def compose(
     font, small = fonts(lay.font_size)
     fs = lay.font_size
     draw.text((int(0.6 * fs), int(0.4 * fs)), title, fill=_TEXT, font=font)
+    if notice:
+        x = int(0.6 * fs) + draw.textlength(title, font=font) + 1.5 * fs
+        draw.text((x, int(0.4 * fs)), notice, fill=WARNING_COLOR if alert else _DIM, font=font)
     draw.text((int(0.6 * fs), int(0.4 * fs) + round(1.35 * fs)), subtitle, fill=_DIM, font=small)
     for (x, y, _, _), caption in zip(lay.panels, captions):
         draw.text((x + int(0.6 * fs), y + int(0.3 * fs)), caption, fill=_DIM, font=small)

@@ -35,6 +35,9 @@ WEIGHTS = {"shape": "shape_weight", "stretch": "stretch_weight", "smooth": "smoo
 #: Slider ranges (logarithmic sliders; a script may set any value the options accept).
 WEIGHT_RANGES = {"shape": (0.01, 100.0), "stretch": (0.01, 100.0), "smooth": (0.01, 1000.0)}
 ITERATION_RANGE = (1, 2000)
+#: RGBA of the panel's warnings line when the result has quality warnings (the
+#: orange of the pictures' notice, :data:`igljoin.viz.overlay.WARNING_COLOR`).
+WARNING_RGBA = (1.0, 170 / 255, 60 / 255, 1.0)
 
 #: The session :func:`inspect` opened last (a new one closes it).
 _ACTIVE: list = []
@@ -254,6 +257,18 @@ class Session:
             lines.append("pending: " + ", ".join(f"{k}={v}" for k, v in self.pending.items()))
         return lines
 
+    def warnings(self) -> list[str]:
+        """The current result's quality warnings, one line each, as the panel shows them.
+
+        ``["no quality warnings"]`` for a clean join, else a count line and
+        ``"code: message"`` per warning (``docs/warnings.md``).
+        """
+        found = list(getattr(self.result, "warnings", ()))
+        if not found:
+            return ["no quality warnings"]
+        many = "s" if len(found) != 1 else ""
+        return [f"{len(found)} quality warning{many}:"] + [f"{w.code}: {w.message}" for w in found]
+
     # -- saving -----------------------------------------------------------------------------
 
     def _next_path(self, stem: str, suffix: str) -> Path:
@@ -355,6 +370,13 @@ class Session:
         psim.Separator()
         for line in self.figures():
             psim.TextUnformatted(line)
+        lines = self.warnings()
+        if getattr(self.result, "warnings", ()):
+            psim.TextColored(WARNING_RGBA, lines[0])
+            for line in lines[1:]:
+                psim.TextWrapped("- " + line)  # messages are long: wrapped to the panel
+        else:
+            psim.TextUnformatted(lines[0])
         psim.Separator()
         names = list(self.scene.available_quantities)
         current = names.index(self.scene.quantity) if self.scene.quantity in names else 0
