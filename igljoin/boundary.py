@@ -22,6 +22,8 @@ import numpy as np
 
 from .errors import CurveError
 from .mesh import Mesh
+from .polyline import arc_length_parameters, polyline_length
+from .polyline import segment_lengths as _segment_lengths  # noqa: F401 (igljoin.correspond)
 
 __all__ = [
     "Curve",
@@ -210,41 +212,6 @@ def _traced_loops(F: np.ndarray) -> list[np.ndarray] | None:
     ordered = np.lexsort((position, low))
     cut = np.flatnonzero(np.diff(low[ordered])) + 1
     return [vertex[part] for part in np.split(ordered, cut)]
-
-
-def polyline_length(P: np.ndarray, closed: bool) -> float:
-    """Length of a polyline ``P`` of shape (k, 3), closing it if ``closed``."""
-    return float(_segment_lengths(P, closed).sum())
-
-
-def _segment_lengths(P: np.ndarray, closed: bool) -> np.ndarray:
-    Q = np.roll(P, -1, axis=0) if closed else P[1:]
-    return np.linalg.norm(Q - P[: len(Q)], axis=1)
-
-
-def arc_length_parameters(P: np.ndarray, closed: bool) -> tuple[np.ndarray, float]:
-    """Normalised arc-length parameter of each polyline vertex (paper Eq. 1).
-
-    Parameters
-    ----------
-    P : ndarray, shape (k, 3)
-    closed : bool
-
-    Returns
-    -------
-    t : ndarray, shape (k,)
-        ``t[0] = 0``; increasing; ``t[-1] = 1`` for an open curve and ``< 1``
-        for a closed one (the closing segment ends at 1).
-    length : float
-        Total length.
-    """
-    seg = _segment_lengths(P, closed)
-    length = float(seg.sum())
-    cum = np.concatenate([[0.0], np.cumsum(seg)])
-    t = cum[: len(P)] / cum[-1] if length > 0 else np.zeros(len(P))
-    if not closed and length > 0:
-        t[-1] = 1.0
-    return t, length
 
 
 class _LoopIndex:
