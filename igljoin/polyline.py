@@ -48,20 +48,10 @@ def mean_segment(P: np.ndarray, closed: bool = True) -> float:
 
 
 def arc_length_parameters(P: np.ndarray, closed: bool = True) -> tuple[np.ndarray, float]:
-    """Normalised arc-length parameter of each polyline vertex (paper Eq. 1).
+    """Normalised arc-length parameter ``t`` (k,) of each vertex of ``P`` (k, d), and the length.
 
-    Parameters
-    ----------
-    P : ndarray, shape (k, d)
-    closed : bool
-
-    Returns
-    -------
-    t : ndarray, shape (k,)
-        ``t[0] = 0``; increasing; ``t[-1] = 1`` for an open curve and ``< 1``
-        for a closed one (the closing segment ends at 1).
-    length : float
-        Total length.
+    Paper Eq. 1: ``t[0] = 0``, increasing; ``t[-1] = 1`` for an open curve
+    and ``< 1`` for a closed one (its closing segment ends at 1).
     """
     seg = segment_lengths(P, closed)
     length = float(seg.sum())

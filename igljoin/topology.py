@@ -228,18 +228,10 @@ def vertex_manifold(F: np.ndarray, n: int, half=None) -> np.ndarray:
 
 
 def fan_counts(F: np.ndarray, n: int) -> np.ndarray:
-    """Number of face fans around each vertex, shape (n,).
+    """Number of face fans of faces ``F`` (m, 3) around each of ``n`` vertices, shape (n,).
 
-    Parameters
-    ----------
-    F : ndarray of int, shape (m, 3)
-    n : int
-
-    Returns
-    -------
-    ndarray of int64, shape (n,)
-        0 for an unused vertex, 1 where :func:`vertex_manifold` holds, more
-        where several fans meet at the vertex (a bow-tie has 2).
+    0 for an unused vertex, 1 where :func:`vertex_manifold` holds, more
+    where several fans meet at the vertex (a bow-tie has 2); int64.
     """
     F = np.asarray(F, dtype=np.int64)
     if not len(F):
@@ -277,20 +269,10 @@ def components(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def repeated_directed_edges(F: np.ndarray, n: int | None = None) -> int:
-    """Directed edges ``a -> b`` that more than one face side traverses.
+    """How many directed edges ``a -> b`` of faces ``F`` (m, 3) more than one face side traverses.
 
-    On an edge-manifold surface such an edge joins two neighbours of
-    opposite orientation.
-
-    Parameters
-    ----------
-    F : ndarray of int, shape (m, 3)
-    n : int, optional
-        Number of vertices (default ``F.max() + 1``).
-
-    Returns
-    -------
-    int
+    On an edge-manifold surface each joins two neighbours of opposite
+    orientation. ``n`` is the number of vertices (default ``F.max() + 1``).
     """
     F = np.asarray(F, dtype=np.int64)
     if not len(F):
