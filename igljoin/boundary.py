@@ -133,15 +133,85 @@ def boundary_loops(F: np.ndarray) -> list[np.ndarray]:
     Returns
     -------
     list of ndarray of int64, shape (k_i,)
-        Longest loop first; loops of equal length keep the order of
-        ``igl.boundary_loop_all`` (each from its smallest vertex, by that vertex).
+        Longest loop first; loops of equal length keep libigl's order.
     """
-    import igl  # here, not at the top: libigl costs start-up time (igljoin info)
+    loops = _traced_loops(F)
+    if loops is None:
+        import igl  # only for what the tracer leaves (libigl costs start-up time)
 
-    F = np.ascontiguousarray(F, dtype=np.int64)
-    loops = [np.asarray(lp, dtype=np.int64) for lp in igl.boundary_loop_all(F) if len(lp) > 0]
+        loops = [np.asarray(lp, dtype=np.int64) for lp in igl.boundary_loop_all(F) if len(lp) > 0]
     loops.sort(key=len, reverse=True)
     return loops
+
+
+def _traced_loops(F: np.ndarray) -> list[np.ndarray] | None:
+    """Boundary loops as ``igl.boundary_loop_all`` lists them, found without a vertex loop.
+
+    A boundary half-edge is a face edge ``F[f, i] -> F[f, (i + 1) % 3]`` whose
+    undirected edge belongs to no other face. When every boundary vertex
+    starts exactly one and ends exactly one boundary half-edge, the loops are
+    the cycles of the map from each boundary vertex to the end of its
+    half-edge; libigl then lists each cycle from its smallest vertex, cycles
+    in increasing order of that vertex, which is the order returned here.
+
+    Parameters
+    ----------
+    F : ndarray of int, shape (m, 3)
+
+    Returns
+    -------
+    list of ndarray of int64, shape (k_i,), or None
+        The loops in libigl's order, or ``None`` when the faces are not a
+        plain triangle array, a face repeats a vertex or a boundary vertex
+        starts or ends more than one boundary half-edge (libigl's choice then
+        depends on its face order, so the caller asks libigl).
+    """
+    F = np.asarray(F)
+    if F.ndim != 2 or F.shape[1] != 3 or F.size == 0 or not np.issubdtype(F.dtype, np.integer):
+        return None
+    F = F.astype(np.int64, copy=False)
+    if F.min() < 0:
+        return None
+    if ((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])).any():
+        return None
+    n = int(F.max()) + 1
+    src = F.reshape(-1)
+    dst = F[:, [1, 2, 0]].reshape(-1)
+    key = np.minimum(src, dst) * n + np.maximum(src, dst)
+    order = np.argsort(key, kind="stable")
+    skey = key[order]
+    alone = np.ones(key.size, dtype=bool)
+    repeat = skey[1:] == skey[:-1]
+    alone[1:] &= ~repeat
+    alone[:-1] &= ~repeat
+    half = order[alone]
+    if half.size == 0:
+        return []
+    tail, head = src[half], dst[half]
+    vertex = np.sort(tail)
+    if (vertex[1:] == vertex[:-1]).any() or not np.array_equal(vertex, np.sort(head)):
+        return None
+    # local ids follow vertex order, so a cycle's smallest vertex has its smallest id
+    succ = np.empty(vertex.size, dtype=np.int64)
+    succ[np.searchsorted(vertex, tail)] = np.searchsorted(vertex, head)
+    rounds = max(int(vertex.size - 1).bit_length(), 1)
+    # pointer doubling: after r rounds ``low`` is the smallest id within 2**r steps
+    low = np.arange(vertex.size)
+    jump = succ
+    for _ in range(rounds):
+        low = np.minimum(low, low[jump])
+        jump = jump[jump]
+    # steps from each vertex to the last vertex of its cycle (the one before its start)
+    last = succ == low
+    steps = np.where(last, 0, 1)
+    jump = np.where(last, np.arange(vertex.size), succ)
+    for _ in range(rounds):
+        steps = steps + steps[jump]
+        jump = jump[jump]
+    position = steps[low] - steps
+    ordered = np.lexsort((position, low))
+    cut = np.flatnonzero(np.diff(low[ordered])) + 1
+    return [vertex[part] for part in np.split(ordered, cut)]
 
 
 class _LoopIndex:
@@ -230,7 +300,9 @@ def select_curve(mesh: Mesh, spec: Any, *, name: str = "curve") -> SelectedCurve
     if curve.indices is not None and any(
         v is not None for v in (curve.start, curve.end, curve.via, curve.loop)
     ):
-        raise CurveError(f"{name}: give either the curve's indices or start/end/via/loop, not both")
+        raise CurveError(
+            f"{name}: give either the curve's indices or start/end/via/loop, not both"
+        )
     if curve.loop is not None and (
         isinstance(curve.loop, bool) or not isinstance(curve.loop, (int, np.integer))
     ):

@@ -20,12 +20,11 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .polyline import mean_segment
-
 __all__ = [
     "SeamFrames",
     "face_normals_areas",
     "face_areas",
+    "face_cross_products",
     "faces_at",
     "seam_frames",
     "vertex_face_matrix",
@@ -73,16 +72,60 @@ def face_normals_areas(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.nda
         ``|c|``; zero-area faces get zero normals.
     areas : ndarray, shape (m,)
         ``|c| / 2``.
+
+    Notes
+    -----
+    Computed coordinate by coordinate on contiguous arrays of shape (m,)
+    with the operations, in the order, of ``np.cross`` (each component one
+    rounded product minus another) and ``np.linalg.norm(c, axis=1)`` (the
+    squares summed left to right), so the values are those of that
+    row-wise formulation, to the last bit.
     """
-    V, F = np.asarray(V), np.asarray(F)
-    c = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    length = np.linalg.norm(c, axis=1)
-    return c / np.where(length > 0, length, 1.0)[:, None], 0.5 * length
+    c = face_cross_products(V, F)
+    length = _lengths(c)
+    normals = c / np.where(length > 0, length, 1.0)
+    return np.ascontiguousarray(normals.T), 0.5 * length
 
 
 def face_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Face areas, shape (m,): the second output of :func:`face_normals_areas` alone."""
-    return face_normals_areas(V, F)[1]
+    return 0.5 * _lengths(face_cross_products(V, F))
+
+
+def _lengths(c: np.ndarray) -> np.ndarray:
+    """Length of each column of ``c`` (shape (3, m) -> (m,)), squares summed left to right."""
+    if not np.issubdtype(c.dtype, np.inexact):
+        c = c.astype(np.float64)  # as np.linalg.norm converts integer input
+    sq = c * c
+    return np.sqrt((sq[0] + sq[1]) + sq[2])
+
+
+def face_cross_products(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Edge cross product of each face, coordinate-major.
+
+    Parameters
+    ----------
+    V : ndarray, shape (n, 3)
+    F : ndarray of int, shape (m, 3)
+
+    Returns
+    -------
+    ndarray, shape (3, m)
+        Row ``i`` is coordinate ``i`` of
+        ``(V[F[:, 1]] − V[F[:, 0]]) × (V[F[:, 2]] − V[F[:, 0]])``: twice the
+        area times the unit normal, rounded as ``np.cross`` rounds it (in
+        the dtype of ``V``).
+    """
+    VT = np.ascontiguousarray(np.asarray(V).T)  # (3, n)
+    FT = np.ascontiguousarray(np.asarray(F).T)  # (3, m)
+    p0 = np.take(VT, FT[0], axis=1)  # (3, m) corner positions
+    a = np.take(VT, FT[1], axis=1) - p0
+    b = np.take(VT, FT[2], axis=1) - p0
+    c = np.empty_like(a)
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        np.multiply(a[j], b[k], out=c[i])
+        c[i] -= a[k] * b[j]
+    return c
 
 
 def vertex_face_matrix(F: np.ndarray, n: int) -> sp.csr_matrix:
@@ -214,7 +257,8 @@ def seam_frames(
     n = unit(W @ normals)
     span = 1
     if radius is not None and radius > 0:
-        mean_edge = mean_segment(P, closed=False) if len(P) > 1 else radius
+        seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
+        mean_edge = float(seg.mean()) if seg.size else radius
         span = int(np.clip(round(radius / max(mean_edge, 1e-300)), 1, max(1, len(P) // 4)))
     T = _curve_tangents(P, closed, span)
     if radius is not None and radius > 0:

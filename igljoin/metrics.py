@@ -28,8 +28,10 @@ Self-intersections
     Pairs of faces of the welded mesh that intersect other than along shared
     edges or vertices, found by CGAL's exact predicates through
     ``igl.copyleft.cgal.remesh_self_intersections(detect_only=True)``; only
-    the faces near the seam (:func:`ring_band`) are tested, which keeps it
-    cheap enough to run on every join.
+    the faces near the seam (:func:`ring_band`) are tested, and only those
+    that a floating-point pre-check with proven signs cannot set apart from
+    all the others reach CGAL, which keeps it cheap enough to run on every
+    join.
 """
 
 from __future__ import annotations
@@ -459,13 +461,11 @@ def self_intersections(V: np.ndarray, F: np.ndarray, faces: np.ndarray | None = 
 
     Notes
     -----
-    CGAL's cost grows with the faces it is given: on this machine (medians)
-    3.0 ms for the 1,200-1,900 faces at the seam of a half-resolution paper
-    sample, 5.7 ms at full resolution and 32 ms at twice the resolution
-    (about 1.5-3 % of those joins). A floating-point pre-check that kept
-    clean faces from CGAL saved 2.3, 4.1 and 25 ms of that but cost 16-36
-    ms on its first call in every process (numba loading its compiled
-    code), so it was removed.
+    Faces that a floating-point pre-check proves apart from every other
+    tested face (:func:`_apart_faces`) are not handed to CGAL; whatever CGAL would
+    find involves only faces that remain, so the pairs are the same. On a
+    clean join few or no faces remain and CGAL is not called; its cost
+    grows with the faces it is given (about 4 ms for 1,200–1,900 faces).
     """
     import igl.copyleft.cgal as cgal  # compiled CGAL bindings: load on first use
 
@@ -474,6 +474,12 @@ def self_intersections(V: np.ndarray, F: np.ndarray, faces: np.ndarray | None = 
     if sel.size < 2:
         return np.zeros((0, 2), dtype=np.int64)
     V = np.asarray(V, dtype=np.float64)
+    if _apart is not None:
+        sub = np.ascontiguousarray(F[sel])
+        corners = np.ascontiguousarray(np.take(V, sub, axis=0))  # (b, 3 corners, 3 coordinates)
+        sel = sel[~_apart(corners, sub)]
+        if sel.size < 2:
+            return np.zeros((0, 2), dtype=np.int64)
     sub = F[sel]
     # the vertices used, ascending, and the faces renumbered onto them (as np.unique would)
     used = np.zeros(len(V), dtype=bool)
@@ -487,6 +493,372 @@ def self_intersections(V: np.ndarray, F: np.ndarray, faces: np.ndarray | None = 
     pairs = sel[np.asarray(pairs, dtype=np.int64).reshape(-1, 2)]
     pairs = np.sort(pairs, axis=1)
     return np.unique(pairs, axis=0) if len(pairs) else pairs
+
+
+# -- floating-point pre-check for self_intersections ------------------------------------------
+#
+# A pair of faces is "apart" when CGAL's test in libigl's SelfIntersectMesh cannot count it:
+# their bounding boxes are disjoint, or a sign test below proves it. Every sign comes from a
+# determinant computed in float64 next to a bound on its rounding error; a sign counts only
+# where the determinant exceeds the bound, so a proof never rests on a rounded sign.
+#
+# The bound: the determinants are d . (p x q) with d, p, q differences of input coordinates
+# (each rounded once) or vectors taken as given, evaluated as a dot product with a rounded
+# cross product. Their error is below 10 eps * sum_k |d_k| (|p_i q_j| + |p_j q_i|)
+# (eps = 2^-53, first order in eps; Shewchuk's orient3d bound is 7 eps times the same sum),
+# and that of a dot product d . n with a given n below 4 eps * sum_k |d_k n_k|; _SIGN_BOUND
+# uses 1e-12 (about 4,500 eps) times these sums. Sums below _SIGN_FLOOR are not used, so
+# underflow (absolute errors near 1e-308) stays far below the bound. 2D orientations use
+# Shewchuk's orient2d sum, whose bound is 3 eps times it.
+_SIGN_BOUND = 1e-12
+_SIGN_FLOOR = 1e-250
+
+try:
+    import numba as _nb
+except ImportError:  # without numba every tested face goes to CGAL
+    _nb = None
+
+
+def _sign(det: float, scale: float) -> int:
+    """Sign of a determinant proven by its error bound: +1, −1, or 0 (not proven).
+
+    Parameters
+    ----------
+    det : float
+        The computed determinant.
+    scale : float
+        The sum of absolute products it bounds its rounding by (see above).
+    """
+    if not scale >= _SIGN_FLOOR:  # also NaN
+        return 0
+    if det > _SIGN_BOUND * scale:
+        return 1
+    if det < -_SIGN_BOUND * scale:
+        return -1
+    return 0
+
+
+def _side(corners, g: int, c: int, f: int, k: int, axes, terms) -> int:
+    """Proven side of corner ``c`` of face ``g`` of plane ``k`` of face ``f``.
+
+    Parameters
+    ----------
+    corners : ndarray, shape (b, 3, 3)
+        Corner coordinates of each face.
+    g, c, f, k : int
+        Plane ``k < 3`` runs through edge ``k`` of ``f`` along its normal;
+        plane 3 is the plane of ``f`` (see :func:`_planes`).
+    axes, terms : ndarray, shape (b, 4, 3)
+        The planes' normals and their error terms.
+
+    Returns
+    -------
+    int
+        Sign of ``(corners[g, c] − origin) · axes[f, k]`` (origin: corner
+        ``k`` of ``f``, corner 0 for its own plane), 0 where not proven.
+    """
+    o = k if k < 3 else 0
+    d0 = corners[g, c, 0] - corners[f, o, 0]
+    d1 = corners[g, c, 1] - corners[f, o, 1]
+    d2 = corners[g, c, 2] - corners[f, o, 2]
+    det = (d0 * axes[f, k, 0] + d1 * axes[f, k, 1]) + d2 * axes[f, k, 2]
+    scale = (abs(d0) * terms[f, k, 0] + abs(d1) * terms[f, k, 1]) + abs(d2) * terms[f, k, 2]
+    return _sign(det, scale)
+
+
+def _planes(corners):
+    """Planes through each face and through each of its edges.
+
+    Parameters
+    ----------
+    corners : ndarray, shape (b, 3, 3)
+        Corner coordinates of each face.
+
+    Returns
+    -------
+    axes, terms : ndarray, shape (b, 4, 3)
+        ``axes[f, 3] = (c1 − c0) × (c2 − c0)``, the normal of face ``f``
+        (its plane runs through ``c0``); ``axes[f, e] = axes[f, 3] ×
+        (c[e+1] − c[e])`` for edge ``e``, the normal of the plane through
+        the edge along the face normal. ``terms`` holds, per component of
+        each cross product ``p × q``, ``|p_i q_j| + |p_j q_i|``.
+    sides : ndarray of int64, shape (b, 3)
+        Proven side of the plane through edge ``e`` of the corner opposite
+        the edge (0: not proven).
+    """
+    b = corners.shape[0]
+    axes = np.empty((b, 4, 3))
+    terms = np.empty((b, 4, 3))
+    sides = np.zeros((b, 3), dtype=np.int64)
+    p = np.empty(3)
+    q = np.empty(3)
+    for f in range(b):
+        for k in range(3):
+            p[k] = corners[f, 1, k] - corners[f, 0, k]
+            q[k] = corners[f, 2, k] - corners[f, 0, k]
+        for i in range(3):
+            x, y = p[(i + 1) % 3] * q[(i + 2) % 3], p[(i + 2) % 3] * q[(i + 1) % 3]
+            axes[f, 3, i] = x - y
+            terms[f, 3, i] = abs(x) + abs(y)
+        for e in range(3):
+            for k in range(3):
+                q[k] = corners[f, (e + 1) % 3, k] - corners[f, e, k]
+            for i in range(3):
+                x = axes[f, 3, (i + 1) % 3] * q[(i + 2) % 3]
+                y = axes[f, 3, (i + 2) % 3] * q[(i + 1) % 3]
+                axes[f, e, i] = x - y
+                terms[f, e, i] = abs(x) + abs(y)
+        for e in range(3):
+            sides[f, e] = _side(corners, f, (e + 2) % 3, f, e, axes, terms)
+    return axes, terms, sides
+
+
+def _orient2d(corners, f: int, p: int, q: int, g: int, r: int, u: int, v: int) -> int:
+    """Proven sign of the orientation of corners ``p, q`` of ``f`` and ``r`` of ``g``.
+
+    Projected on coordinates ``u, v``; 0 where not proven.
+    """
+    t1 = (corners[f, p, u] - corners[g, r, u]) * (corners[f, q, v] - corners[g, r, v])
+    t2 = (corners[f, p, v] - corners[g, r, v]) * (corners[f, q, u] - corners[g, r, u])
+    return _sign(t1 - t2, abs(t1) + abs(t2))
+
+
+def _pair_apart(i: int, j: int, corners, F, axes, terms, sides) -> bool:
+    """Whether CGAL's test provably does not count faces ``i`` and ``j``.
+
+    By the vertices they share (by index):
+
+    * three: libigl skips duplicate faces.
+    * two: libigl counts the pair only if the other corner of ``i`` lies on
+      the plane of ``j`` and the two other corners lie on the same side of
+      the shared edge; apart if the corner is proven off the plane, or the
+      two corners proven on opposite sides of the edge in a coordinate
+      projection (where the four points are coplanar, a projection that
+      keeps them apart keeps their sides).
+    * one or none: apart when a plane has one face on one closed side and
+      the other face's corners, but for shared ones on the plane, strictly
+      on the other side: then the faces meet at most in the shared vertex.
+      Tried: each face's plane, the planes through each face's edges along
+      its normal, then, with a shared vertex, :func:`_wedges_apart`.
+    """
+    shared = 0
+    for a in range(3):
+        for b in range(3):
+            if F[i, a] == F[j, b]:
+                shared += 1
+    if shared >= 3:
+        return True
+    if shared == 2:
+        oa, ob = 0, 0
+        for a in range(3):
+            if F[i, a] != F[j, 0] and F[i, a] != F[j, 1] and F[i, a] != F[j, 2]:
+                oa = a
+            if F[j, a] != F[i, 0] and F[j, a] != F[i, 1] and F[j, a] != F[i, 2]:
+                ob = a
+        if _side(corners, i, oa, j, 3, axes, terms) != 0:
+            return True
+        s0, s1 = (oa + 1) % 3, (oa + 2) % 3
+        for k in range(3):
+            u, v = (k + 1) % 3, (k + 2) % 3
+            sa = _orient2d(corners, i, s0, s1, i, oa, u, v)
+            if sa != 0 and sa == -_orient2d(corners, i, s0, s1, j, ob, u, v):
+                return True
+        return False
+    for turn in range(2):
+        f, g = (i, j) if turn == 0 else (j, i)
+        for k in range(3, -1, -1):  # the face's own plane first, then its edges' planes
+            want = 0 if k == 3 else -sides[f, k]
+            if k < 3 and want == 0:
+                continue
+            ok = True
+            for c in range(3):
+                x = F[g, c]
+                if k == 3:
+                    if x == F[f, 0] or x == F[f, 1] or x == F[f, 2]:
+                        continue  # a shared vertex lies on the plane
+                elif x == F[f, k] or x == F[f, (k + 1) % 3]:
+                    continue  # an end of the edge lies on its plane
+                s = _side(corners, g, c, f, k, axes, terms)
+                if s == 0 or (want != 0 and s != want):
+                    ok = False
+                    break
+                want = s
+            if ok:
+                return True
+    return shared == 1 and _wedges_apart(i, j, corners, F, axes)
+
+
+def _plane_side(d0: float, d1: float, d2: float, n0: float, n1: float, n2: float) -> int:
+    """Proven sign of ``d · n`` for a difference ``d`` (rounded once) and a given vector ``n``."""
+    det = (d0 * n0 + d1 * n1) + d2 * n2
+    return _sign(det, (abs(d0 * n0) + abs(d1 * n1)) + abs(d2 * n2))
+
+
+def _wedges_apart(i: int, j: int, corners, F, axes) -> bool:
+    """Whether faces ``i`` and ``j``, sharing one vertex, meet only there.
+
+    Tries planes through the shared vertex that contain ``w``, the sum of
+    the two unit normals: the plane through an edge at the shared vertex
+    (its far end then lies on the plane), and the planes along the sum of
+    one unit edge direction of each face, which run between the faces where
+    edges of one line up with edges of the other (as on a structured grid,
+    where every other plane through an edge touches the other face). Apart
+    when one face's other corners are proven on one side and the other
+    face's on the other side.
+    """
+    si, sj = 0, 0
+    for a in range(3):
+        for b in range(3):
+            if F[i, a] == F[j, b]:
+                si, sj = a, b
+    li = np.sqrt(axes[i, 3, 0] ** 2 + axes[i, 3, 1] ** 2 + axes[i, 3, 2] ** 2)
+    lj = np.sqrt(axes[j, 3, 0] ** 2 + axes[j, 3, 1] ** 2 + axes[j, 3, 2] ** 2)
+    if not (li > 0 and lj > 0):
+        return False
+    w = np.empty(3)
+    for k in range(3):
+        w[k] = axes[i, 3, k] / li + axes[j, 3, k] / lj
+    # edges from the shared vertex: rows 0, 1 of face i, rows 2, 3 of face j
+    edge = np.empty((4, 3))
+    unit = np.empty((4, 3))
+    for r in range(4):
+        f, c0, c = (i, si, (si + 1 + r) % 3) if r < 2 else (j, sj, (sj + r - 1) % 3)
+        for k in range(3):
+            edge[r, k] = corners[f, c, k] - corners[f, c0, k]
+        length = np.sqrt(edge[r, 0] ** 2 + edge[r, 1] ** 2 + edge[r, 2] ** 2)
+        if not length > 0:
+            return False
+        for k in range(3):
+            unit[r, k] = edge[r, k] / length
+    axis = np.empty(3)
+    terms = np.empty(3)
+    # the plane through edge r along w; its face's other edge on one side, the other face's
+    # two edges on the other
+    for r in range(4):
+        for k in range(3):
+            a = w[(k + 1) % 3] * edge[r, (k + 2) % 3]
+            b = w[(k + 2) % 3] * edge[r, (k + 1) % 3]
+            axis[k] = a - b
+            terms[k] = abs(a) + abs(b)
+        mate = r ^ 1
+        own = _sign(
+            (edge[mate, 0] * axis[0] + edge[mate, 1] * axis[1]) + edge[mate, 2] * axis[2],
+            (abs(edge[mate, 0]) * terms[0] + abs(edge[mate, 1]) * terms[1])
+            + abs(edge[mate, 2]) * terms[2],
+        )
+        if own == 0:
+            continue
+        ok = True
+        other = 2 if r < 2 else 0
+        for q in range(other, other + 2):
+            x = edge[q]
+            s = _sign(
+                (x[0] * axis[0] + x[1] * axis[1]) + x[2] * axis[2],
+                (abs(x[0]) * terms[0] + abs(x[1]) * terms[1]) + abs(x[2]) * terms[2],
+            )
+            if s != -own:
+                ok = False
+                break
+        if ok:
+            return True
+    # the planes along w and a direction between the faces
+    n = np.empty(3)
+    for p in range(2):
+        for q in range(2, 4):
+            for k in range(3):
+                d1 = unit[p, (k + 1) % 3] + unit[q, (k + 1) % 3]
+                d2 = unit[p, (k + 2) % 3] + unit[q, (k + 2) % 3]
+                n[k] = d1 * w[(k + 2) % 3] - d2 * w[(k + 1) % 3]
+            first = _plane_side(edge[0, 0], edge[0, 1], edge[0, 2], n[0], n[1], n[2])
+            second = _plane_side(edge[1, 0], edge[1, 1], edge[1, 2], n[0], n[1], n[2])
+            if first == 0 or second != first:
+                continue
+            if (
+                _plane_side(edge[2, 0], edge[2, 1], edge[2, 2], n[0], n[1], n[2]) == -first
+                and _plane_side(edge[3, 0], edge[3, 1], edge[3, 2], n[0], n[1], n[2]) == -first
+            ):
+                return True
+    return False
+
+
+def _apart_faces(corners, F):
+    """Faces proven apart from every other face (see :func:`_pair_apart`).
+
+    Parameters
+    ----------
+    corners : ndarray, shape (b, 3, 3)
+        Corner coordinates of each face.
+    F : ndarray of int64, shape (b, 3)
+        Their vertex indices.
+
+    Returns
+    -------
+    ndarray of bool, shape (b,)
+
+    Notes
+    -----
+    Pairs come from a sweep along the coordinate axis where the fewest
+    boxes start before another box ends: sorted by their lower ends, each
+    box meets the boxes that start before it ends; pairs whose closed boxes
+    are disjoint are apart.
+    """
+    b = corners.shape[0]
+    lo = np.empty((3, b))
+    hi = np.empty((3, b))
+    for f in range(b):
+        for k in range(3):
+            lo[k, f] = min(corners[f, 0, k], corners[f, 1, k], corners[f, 2, k])
+            hi[k, f] = max(corners[f, 0, k], corners[f, 1, k], corners[f, 2, k])
+    axis, fewest = 0, -1
+    order = np.arange(b)
+    for k in range(3):
+        by_start = np.argsort(lo[k], kind="mergesort")
+        visits = np.searchsorted(lo[k][by_start], hi[k], side="right").sum()
+        if fewest < 0 or visits < fewest:
+            axis, fewest, order = k, visits, by_start
+    slo = np.empty((3, b))  # boxes in sweep order
+    shi = np.empty((3, b))
+    for ii in range(b):
+        for k in range(3):
+            slo[k, ii] = lo[k, order[ii]]
+            shi[k, ii] = hi[k, order[ii]]
+    axes, terms, sides = _planes(corners)
+    near = np.zeros(b, dtype=np.bool_)
+    for ii in range(b):
+        i = order[ii]
+        for jj in range(ii + 1, b):
+            if slo[axis, jj] > shi[axis, ii]:
+                break
+            if (
+                slo[0, jj] > shi[0, ii]
+                or slo[0, ii] > shi[0, jj]
+                or slo[1, jj] > shi[1, ii]
+                or slo[1, ii] > shi[1, jj]
+                or slo[2, jj] > shi[2, ii]
+                or slo[2, ii] > shi[2, jj]
+            ):
+                continue
+            j = order[jj]
+            if near[i] and near[j]:
+                continue
+            if not _pair_apart(i, j, corners, F, axes, terms, sides):
+                near[i] = True
+                near[j] = True
+    return ~near
+
+
+#: ``_apart(corners, F)``: :func:`_apart_faces` compiled by numba (cached on disk), or
+#: ``None`` without numba. The helpers it calls are compiled in place first.
+_apart = None
+if _nb is not None:
+    _sign = _nb.njit(cache=True, inline="always")(_sign)
+    _side = _nb.njit(cache=True, inline="always")(_side)
+    _planes = _nb.njit(cache=True)(_planes)
+    _orient2d = _nb.njit(cache=True, inline="always")(_orient2d)
+    _plane_side = _nb.njit(cache=True, inline="always")(_plane_side)
+    _wedges_apart = _nb.njit(cache=True)(_wedges_apart)
+    _pair_apart = _nb.njit(cache=True, inline="always")(_pair_apart)
+    _apart = _nb.njit(cache=True)(_apart_faces)
 
 
 def point_polyline_distance(P: np.ndarray, C: np.ndarray, closed: bool) -> np.ndarray:

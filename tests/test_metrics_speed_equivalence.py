@@ -1,21 +1,24 @@
 """The fast paths of the metrics phase give exactly what the plain computations give.
 
-The metrics and the weld were sped up by computing on contiguous coordinate
-arrays, on the faces at a curve only, on cached host values, on candidate
-pairs instead of all pairs, and with the manifold checks of
-:mod:`igljoin.topology` instead of libigl's. Each test runs a fast path next
-to a reference computation (the plain code it replaced, kept below, or libigl
-itself) and compares. Tolerances are zero throughout: the fast paths perform the same
+The metrics, the weld and its self-intersection count were sped up by
+computing on contiguous coordinate arrays, on the faces at a curve only, on
+cached host values, on candidate pairs instead of all pairs, with the manifold
+checks of :mod:`igljoin.topology` instead of libigl's, and with a floating-point
+pre-check that keeps clean faces away from CGAL. Each test runs a fast path next
+to a reference computation (the plain code it replaced, kept below, or libigl /
+CGAL themselves) and compares. Tolerances are zero throughout: the fast paths perform the same
 floating-point operations in the same order (or select among identical
 values), so every float is compared bit for bit and every count exactly.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import importlib
 
 import igl
+import igl.copyleft.cgal as cgal
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -23,6 +26,7 @@ import scipy.sparse as sp
 import igljoin
 from igljoin import frames, metrics, phantoms, topology
 from igljoin.correspond import rigid_fit
+from igljoin.mesh import Mesh
 
 weld_mod = importlib.import_module("igljoin.weld")
 
@@ -112,7 +116,44 @@ def _ref_point_polyline_distance(P, C, closed):
     return np.sqrt(np.einsum("pkj,pkj->pk", D, D).min(axis=1))
 
 
+def _cgal_pairs(V, F, faces=None):
+    """Self-intersecting pairs straight from CGAL, on every tested face."""
+    sel = np.arange(len(F)) if faces is None else np.flatnonzero(faces)
+    if sel.size < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    used, local = np.unique(F[sel], return_inverse=True)
+    pairs = cgal.remesh_self_intersections(
+        np.ascontiguousarray(V[used], dtype=np.float64),
+        np.ascontiguousarray(local.reshape(-1, 3).astype(np.int64)),
+        detect_only=True,
+    )[2]
+    pairs = np.sort(sel[np.asarray(pairs, dtype=np.int64).reshape(-1, 2)], axis=1)
+    return np.unique(pairs, axis=0) if len(pairs) else pairs
+
+
+def _random_soup(rng, n_faces, n_vertices, scale):
+    """Faces on shared random vertices, crossing each other often."""
+    V = rng.normal(size=(n_vertices, 3)) * scale
+    F = np.array([rng.choice(n_vertices, 3, replace=False) for _ in range(n_faces)])
+    return V, F
+
+
 # -- floating-point kernels -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32, np.int64])
+def test_face_normals_areas_match_the_row_wise_formulation(joins, dtype):
+    rng = np.random.default_rng(0)
+    V = (rng.normal(size=(400, 3)) * 10.0 ** rng.uniform(-4, 4, size=(400, 1))).astype(dtype)
+    F = rng.integers(0, 400, size=(2000, 3))
+    F[:50, 2] = F[:50, 0]  # zero-area faces get zero normals
+    meshes = [(V, F)] + [(r.guest.V.astype(dtype), r.guest.F) for _, r in joins.values()]
+    for V, F in meshes:
+        N, A = frames.face_normals_areas(V, F)
+        N0, A0 = _ref_face_normals_areas(V, F)
+        _assert_same(N, N0)
+        _assert_same(A, A0)
+        _assert_same(frames.face_areas(V, F), A0)
 
 
 def test_edge_strain_and_displacement_match_row_norms(joins):
@@ -408,3 +449,180 @@ def test_seam_orientation_counts_only_need_the_seam_faces(joins):
                     weld_mod._directed_count(keys_seam, a, b, n),
                     weld_mod._directed_count(keys_all, a, b, n),
                 )
+
+
+# -- self-intersections -----------------------------------------------------------------------
+
+
+def _check_self_intersections(V, F, faces=None):
+    """Fast pairs equal CGAL's on all faces, and no face CGAL reports is set aside."""
+    ref = _cgal_pairs(V, F, faces)
+    _assert_same(metrics.self_intersections(V, F, faces), ref)
+    sel = np.arange(len(F)) if faces is None else np.flatnonzero(faces)
+    if metrics._apart is not None and sel.size >= 2:
+        sub = np.ascontiguousarray(F[sel])
+        apart = metrics._apart(np.ascontiguousarray(np.take(V, sub, axis=0)), sub)
+        reported = np.isin(sel, ref.reshape(-1))
+        assert not (apart & reported).any()
+    return ref
+
+
+def test_self_intersections_of_random_soups():
+    rng = np.random.default_rng(7)
+    found = 0
+    for _ in range(40):
+        scale = 10.0 ** rng.uniform(-6, 6)
+        V, F = _random_soup(rng, int(rng.integers(20, 120)), int(rng.integers(10, 80)), scale)
+        V += rng.normal(size=3) * 1e3 * scale  # far from the origin: rounding matters
+        found += len(_check_self_intersections(V, F))
+    assert found > 100
+
+
+def test_self_intersections_of_exact_touching_configurations():
+    """Integer coordinates: vertices on faces, edges through edges, coplanar overlaps."""
+    rng = np.random.default_rng(8)
+    found = 0
+    for trial in range(60):
+        V = rng.integers(-3, 4, size=(40, 3)).astype(np.float64)
+        if trial % 2:
+            V[:, 2] = 0.0  # all coplanar: only CGAL's coplanar tests decide
+        if trial % 3 == 0:
+            V[20:] = V[:20]  # the same points under other indices
+        F = np.array([rng.choice(40, 3, replace=False) for _ in range(50)])
+        found += len(_check_self_intersections(V, F))
+    # a flat grid, a face folded exactly onto its neighbour, and a duplicated face
+    grid = phantoms.paper_sample("open_strip", "equal").host
+    V, F = grid.V.copy(), grid.F.copy()
+    pairs, _ = _ref_adjacent_face_pairs(F)
+    a, b = pairs[len(pairs) // 2]
+    moved = np.setdiff1d(F[a], F[b])[0]
+    opposite = np.setdiff1d(F[b], F[a])[0]
+    V[moved] = 0.5 * (V[moved] + V[opposite]) * 0 + V[opposite]  # onto the neighbour's corner
+    F = np.vstack([F, F[3]])
+    found += len(_check_self_intersections(V, F))
+    assert found > 50
+
+
+def _flat_grid(n: int, offset=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """An n x n vertex grid of unit squares in the plane z = 0, two triangles per square."""
+    x = np.arange(n, dtype=np.float64)
+    X, Y = np.meshgrid(x, x, indexing="ij")
+    V = np.column_stack([X.ravel(), Y.ravel(), np.zeros(n * n)]) + np.asarray(offset)
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
+    a = (i * n + j).ravel()
+    F = np.concatenate([np.stack([a, a + n, a + n + 1], 1), np.stack([a, a + n + 1, a + 1], 1)])
+    return V, F
+
+
+def test_self_intersections_of_touching_grids():
+    """Grids meeting exactly: overlapping in their plane, crossing, touching along a line."""
+    V1, F1 = _flat_grid(8)
+    found = 0
+    for offset, turn in (
+        ((0.5, 0.5, 0.0), False),  # coplanar, half a square over: every face overlaps
+        ((0.0, 0.0, 0.0), False),  # the same points under other indices
+        ((20.0, 0.0, 0.0), False),  # apart
+        ((0.0, 3.0, 0.0), True),  # upright, its lower edge along a grid line: touching
+        ((0.0, 3.5, -2.0), True),  # upright, through the middle of a row of squares
+    ):
+        V2, F2 = _flat_grid(6, (0.0, 0.0, 0.0))
+        if turn:
+            V2 = V2[:, [0, 2, 1]]  # into the plane y = 0
+        V2 = V2 + np.asarray(offset)
+        V = np.vstack([V1, V2])
+        F = np.vstack([F1, F2 + len(V1)])
+        found += len(_check_self_intersections(V, F))
+    assert found > 100
+
+
+def test_self_intersections_at_rounding_level():
+    """Grids and a tube with vertices moved by 1e-17 to 1e-9 of their size."""
+    rng = np.random.default_rng(11)
+    strip = phantoms.paper_sample("open_strip", "equal").host
+    tube = phantoms.paper_sample("end_to_end", "equal", resolution=0.4).host
+    V0, F0 = _flat_grid(12)
+    kept = 0
+    for trial in range(24):
+        mesh = (
+            (strip.V, strip.F)
+            if trial % 3 == 0
+            else (tube.V, tube.F)
+            if trial % 3 == 1
+            else (V0, F0)
+        )
+        V, F = mesh[0].copy(), mesh[1]
+        size = float(np.abs(V).max())
+        moved = rng.random(len(V)) < 0.3
+        V[moved] += rng.normal(size=(moved.sum(), 3)) * size * 10.0 ** rng.uniform(-17, -9)
+        # and a few vertices pushed exactly onto a neighbour's neighbour
+        for _ in range(3):
+            f = rng.integers(0, len(F))
+            V[F[f, 0]] = V[F[f, 1]] + (V[F[f, 2]] - V[F[f, 1]]) * 0.5
+        _check_self_intersections(V, F)
+        sub = np.ascontiguousarray(F)
+        kept += int((~metrics._apart(np.ascontiguousarray(np.take(V, sub, axis=0)), sub)).sum())
+    assert kept  # the sign tests met cases they could not decide
+
+
+def test_self_intersections_of_real_meshes():
+    pytest.importorskip("pymeshlab")
+    from .cuts import sample_mesh_dir
+
+    rng = np.random.default_rng(9)
+    meshes = 0
+    for path in sorted(sample_mesh_dir().rglob("*")):
+        if path.suffix.lower() not in {".obj", ".ply", ".off", ".stl"}:
+            continue
+        try:
+            mesh = igljoin.read_mesh(path)
+        except igljoin.MeshError:
+            continue
+        if mesh.n_faces > 30_000:
+            continue
+        V, F = mesh.V, mesh.F
+        _check_self_intersections(V, F)
+        # a crumpled copy: vertices shaken by about an edge length
+        edge = float(np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean())
+        _check_self_intersections(V + rng.normal(scale=edge, size=V.shape), F)
+        meshes += 1
+    assert meshes >= 3
+
+
+def test_self_intersections_of_welded_joins(joins):
+    for _, res in joins.values():
+        w = res.merged
+        band = metrics.ring_band(w.mesh.F, w.seam, metrics.SELF_INTERSECTION_RINGS)
+        _check_self_intersections(w.mesh.V, w.mesh.F, band)
+        assert res.metrics["self_intersections"]["pairs"] == len(
+            _cgal_pairs(w.mesh.V, w.mesh.F, band)
+        )
+    # the bypass graft crosses itself near its seams, and a guest pushed through its host
+    g = phantoms.bypass_graft_sample(resolution=0.6)
+    res = igljoin.join(g.hosts, g.guest, seams=g.seams)
+    w = res.merged
+    band = metrics.ring_band(w.mesh.F, w.seam, metrics.SELF_INTERSECTION_RINGS)
+    assert len(_check_self_intersections(w.mesh.V, w.mesh.F, band))
+    s, res = joins["partial_patch", "equal"]
+    X = res.guest.V.copy()
+    inner = np.setdiff1d(
+        np.unique(res.guest.F[np.isin(res.guest.F, res.seam).any(axis=1)]), res.seam
+    )
+    X[inner] -= 2.0 * np.array([0.0, 0.0, 1.0]) * np.sign(np.mean(res.guest.V[:, 2]) + 1e-9)
+    pushed = dataclasses.replace(res, guest=Mesh(X, res.guest.F, res.guest.vertex_attributes))
+    pw = pushed.merged
+    band = metrics.ring_band(pw.mesh.F, pw.seam, metrics.SELF_INTERSECTION_RINGS)
+    assert len(_check_self_intersections(pw.mesh.V, pw.mesh.F, band))
+
+
+def test_self_intersections_without_numba_are_the_same(monkeypatch, joins):
+    rng = np.random.default_rng(10)
+    V, F = _random_soup(rng, 80, 50, 1.0)
+    s, res = joins["end_to_end", "equal"]
+    w = res.merged
+    band = metrics.ring_band(w.mesh.F, w.seam, 3)
+    fast = [metrics.self_intersections(V, F), metrics.self_intersections(w.mesh.V, w.mesh.F, band)]
+    monkeypatch.setattr(metrics, "_apart", None)
+    slow = [metrics.self_intersections(V, F), metrics.self_intersections(w.mesh.V, w.mesh.F, band)]
+    for a, b in zip(fast, slow):
+        _assert_same(a, b)
+    assert len(fast[0])

@@ -1,11 +1,12 @@
 """The fast set-up paths give exactly what the straightforward computations give.
 
-``check_surface`` (through :mod:`igljoin.topology`), ``pair_curves`` and
+``check_surface``, ``boundary_loops``, ``pair_curves`` and
 ``split_boundary_faces`` replaced libigl calls, structured ``np.unique`` sorts
 and per-candidate loops by vectorised code. Each test here runs the fast path
 next to a reference computation (libigl, or the per-candidate code kept
-below) and asserts identical results: same flags, same chosen start and the
-same residual bits, same error messages. No tolerance is used anywhere: every comparison is exact.
+below) and asserts identical results: same flags, same loops in the same
+order, same chosen start and the same residual bits, same error messages.
+No tolerance is used anywhere: every comparison is exact.
 """
 
 from __future__ import annotations
@@ -17,9 +18,10 @@ import numpy as np
 import pytest
 
 import igljoin
+from igljoin import boundary as boundary_mod
 from igljoin import correspond as corr
 from igljoin import topology, validate
-from igljoin.boundary import SelectedCurve, arc_length_parameters, select_curve
+from igljoin.boundary import SelectedCurve, arc_length_parameters, boundary_loops, select_curve
 from igljoin.errors import MeshError
 from igljoin.mesh import Mesh
 from igljoin.phantoms import bypass_graft_sample, paper_sample
@@ -354,6 +356,75 @@ def test_shared_rows_match_unique_rows():
         _, inverse = np.unique(P, axis=0, return_inverse=True)
         want = np.bincount(inverse.ravel())[inverse.ravel()] > 1
         np.testing.assert_array_equal(topology.shared_rows(P), want)
+
+
+# ----------------------------------------------------------------------------
+# boundary loops: traced loops against igl.boundary_loop_all
+# ----------------------------------------------------------------------------
+
+
+def _libigl_loops(F):
+    return [np.asarray(lp, dtype=np.int64) for lp in igl.boundary_loop_all(F) if len(lp) > 0]
+
+
+def _same_loops(a, b):
+    return len(a) == len(b) and all(np.array_equal(x, y) for x, y in zip(a, b))
+
+
+def test_traced_loops_on_paper_samples(paper):
+    for s in paper.values():
+        for mesh in (s.host, s.guest):
+            traced = boundary_mod._traced_loops(mesh.F)
+            assert traced is not None
+            assert _same_loops(traced, _libigl_loops(mesh.F))
+
+
+def test_traced_loops_on_holed_library_meshes(library):
+    # a few random faces removed (and vertices renumbered): several loops, libigl's order
+    # and starts; holes that happen to touch at a vertex are left to libigl
+    rng = np.random.default_rng(2)
+    traced_count = 0
+    for mesh in library:
+        if mesh.n_faces > 20000:
+            continue
+        for _ in range(4):
+            drop = rng.choice(mesh.n_faces, size=int(rng.integers(3, 12)), replace=False)
+            F = _relabel(np.delete(mesh.F, drop, axis=0), rng)
+            traced = boundary_mod._traced_loops(F)
+            ref = _libigl_loops(F)
+            if traced is not None:
+                traced_count += 1
+                assert _same_loops(traced, ref)
+            # either way boundary_loops lists libigl's loops, longest first
+            assert _same_loops(boundary_loops(F), sorted(ref, key=len, reverse=True))
+    assert traced_count >= 10
+
+
+def test_traced_loops_on_grids_with_holes():
+    rng = np.random.default_rng(4)
+    V, F = _grid(12, 9)
+    for _ in range(100):
+        G = _relabel(F[rng.random(len(F)) > 0.15], rng)
+        traced = boundary_mod._traced_loops(G)
+        if traced is not None:
+            assert _same_loops(traced, _libigl_loops(G))
+        assert _same_loops(boundary_loops(G), sorted(_libigl_loops(G), key=len, reverse=True))
+
+
+@pytest.mark.parametrize(
+    "F, traced",
+    [
+        (BOWTIE, None),  # vertex 0 starts two boundary half-edges
+        ([[0, 1, 2], [0, 0, 3]], None),  # a face repeating a vertex
+        (np.zeros((0, 3), dtype=np.int64), None),
+        ([[0, 1, 2], [0, 2, 1]], []),  # closed: no boundary
+    ],
+    ids=["bowtie", "degenerate", "empty", "closed"],
+)
+def test_boundary_loops_where_tracing_declines_or_finds_nothing(F, traced):
+    F = np.asarray(F, dtype=np.int64)
+    assert boundary_mod._traced_loops(F) == traced
+    assert _same_loops(boundary_loops(F), sorted(_libigl_loops(F), key=len, reverse=True))
 
 
 # ----------------------------------------------------------------------------
