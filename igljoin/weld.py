@@ -432,19 +432,21 @@ def check_welded(welded: Welded, *, full: bool = False) -> None:
     lookup = np.zeros(n, dtype=np.int64)
     lookup[ids] = np.arange(len(ids))
     local = lookup[sub]
-    E, _, faces_at_edge = topology.edges(local, len(ids))
+    half = topology.half_edges(local, len(ids))
+    start, faces_at_edge = topology.runs(half[3])
     crowded = faces_at_edge > 2
     if crowded.any():
+        E = np.stack(np.divmod(half[3][start[crowded]], len(ids)), axis=1)
         raise WeldError(
             f"weld: {int(crowded.sum())} edges have more than two faces "
-            f"{_offenders(welded, ids[E[crowded]])}; a guest triangle across the seam duplicates "
+            f"{_offenders(welded, ids[E])}; a guest triangle across the seam duplicates "
             "a host edge there — refine the guest near the seam (igljoin.clean) or pick curves "
             "that do not cut corners"
         )
     used = np.zeros(n, dtype=bool)
     used[(F if full else welded.seam).reshape(-1)] = True
     vm = np.zeros(n, dtype=bool)
-    vm[ids] = topology.vertex_manifold(local, len(ids))
+    vm[ids] = topology.vertex_manifold(local, len(ids), half)
     bad = np.flatnonzero(~vm & used)
     if bad.size:
         raise WeldError(
