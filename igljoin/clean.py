@@ -172,19 +172,11 @@ def _edge_lengths(V: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 
 def aspect_ratios(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Aspect ratio ``2 r / R`` of each face: 1 for equilateral, 0 for degenerate.
+    """Aspect ratio ``2 r / R`` (m,) of each face ``F`` (m, 3) of ``V`` (n, 3).
 
-    Parameters
-    ----------
-    V : ndarray, shape (n, 3)
-    F : ndarray of int, shape (m, 3)
-
-    Returns
-    -------
-    ndarray, shape (m,)
-        ``2 r / R = 16 A^2 / (a b c (a + b + c))`` with ``A`` the area and
-        ``a, b, c`` the edge lengths; the measure pymeshlab's
-        ``compute_selection_bad_faces`` uses.
+    1 for equilateral, 0 for degenerate: ``16 A^2 / (a b c (a + b + c))``
+    with ``A`` the area and ``a, b, c`` the edge lengths, the measure
+    pymeshlab's ``compute_selection_bad_faces`` uses.
     """
     L = _edge_lengths(V, F)
     area = face_areas(V, F)
@@ -554,6 +546,18 @@ def _apply(ms, counts: dict, key: str, measure: str, filter_name: str, **params)
         counts["zero_area_faces"] += int(b[1] - a[1])
 
 
+def _split_non_manifold_vertices(ms, counts: dict) -> None:
+    """pymeshlab's repair of vertices with several fans (a copy per fan, none moved)."""
+    _apply(
+        ms,
+        counts,
+        "non_manifold_vertices",
+        "added_vertices",
+        "meshing_repair_non_manifold_vertices",
+        vertdispratio=0.0,
+    )
+
+
 def clean(
     mesh: Any,
     *,
@@ -653,14 +657,7 @@ def clean(
     V, F, source = _arrays(ms)
     F, counts["non_manifold_edge_faces"] = _manifold_edges(V, F)
     ms = _meshset(ml, V, F, source)
-    _apply(
-        ms,
-        counts,
-        "non_manifold_vertices",
-        "added_vertices",
-        "meshing_repair_non_manifold_vertices",
-        vertdispratio=0.0,
-    )
+    _split_non_manifold_vertices(ms, counts)
     V, F, source = _arrays(ms)
     F, counts["faces_reoriented"] = _orient(F)
     slivers = aspect_ratios(V, F) < sliver_ratio
@@ -677,14 +674,7 @@ def clean(
                 ms, counts, "sliver_faces_removed", "removed_faces", "meshing_remove_selected_faces"
             )
             # a removed face can leave a vertex with two fans
-            _apply(
-                ms,
-                counts,
-                "non_manifold_vertices",
-                "added_vertices",
-                "meshing_repair_non_manifold_vertices",
-                vertdispratio=0.0,
-            )
+            _split_non_manifold_vertices(ms, counts)
             V, F, source = _arrays(ms)
     if not len(F):
         raise MeshError(

@@ -109,20 +109,12 @@ def _lengths(c: np.ndarray) -> np.ndarray:
 
 
 def face_cross_products(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Edge cross product of each face, coordinate-major.
+    """Edge cross product of each face ``F`` (m, 3) of ``V`` (n, 3), coordinate-major (3, m).
 
-    Parameters
-    ----------
-    V : ndarray, shape (n, 3)
-    F : ndarray of int, shape (m, 3)
-
-    Returns
-    -------
-    ndarray, shape (3, m)
-        Row ``i`` is coordinate ``i`` of
-        ``(V[F[:, 1]] − V[F[:, 0]]) × (V[F[:, 2]] − V[F[:, 0]])``: twice the
-        area times the unit normal, rounded as ``np.cross`` rounds it (in
-        the dtype of ``V``).
+    Row ``i`` is coordinate ``i`` of
+    ``(V[F[:, 1]] − V[F[:, 0]]) × (V[F[:, 2]] − V[F[:, 0]])``: twice the area
+    times the unit normal, rounded as ``np.cross`` rounds it (in the dtype
+    of ``V``).
     """
     VT = np.ascontiguousarray(np.asarray(V).T)  # (3, n)
     FT = np.ascontiguousarray(np.asarray(F).T)  # (3, m)

@@ -33,18 +33,10 @@ _RESULT_FIELDS = {
 
 
 def vertex_edge_strain(V0: np.ndarray, V1: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Mean relative length change of the edges at each vertex.
+    """Mean relative length change ``(ℓ′ − ℓ)/ℓ`` (n,) of the edges at each vertex.
 
-    Parameters
-    ----------
-    V0, V1 : ndarray, shape (n, 3)
-        Rest and deformed positions.
-    F : ndarray of int64, shape (m, 3)
-
-    Returns
-    -------
-    ndarray, shape (n,)
-        ``(ℓ′ − ℓ)/ℓ`` averaged over incident edges: > 0 stretched, < 0 shrunk.
+    ``V0``, ``V1`` (n, 3) are the rest and deformed positions, ``F`` (m, 3)
+    the faces; > 0 stretched, < 0 shrunk.
     """
     E = unique_edges(F)
     return np.nan_to_num(vertex_strain(E, edge_strain(V0, V1, E), len(V0)))
