@@ -27,9 +27,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
+from . import topology
 from .boundary import Curve, boundary_loops, polyline_length, select_curve
 from .errors import CurveError, MeshError, missing_extra
 from .frames import face_areas
@@ -173,19 +172,11 @@ def _edge_lengths(V: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 
 def aspect_ratios(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Aspect ratio ``2 r / R`` of each face: 1 for equilateral, 0 for degenerate.
+    """Aspect ratio ``2 r / R`` (m,) of each face ``F`` (m, 3) of ``V`` (n, 3).
 
-    Parameters
-    ----------
-    V : ndarray, shape (n, 3)
-    F : ndarray of int, shape (m, 3)
-
-    Returns
-    -------
-    ndarray, shape (m,)
-        ``2 r / R = 16 A^2 / (a b c (a + b + c))`` with ``A`` the area and
-        ``a, b, c`` the edge lengths; the measure pymeshlab's
-        ``compute_selection_bad_faces`` uses.
+    1 for equilateral, 0 for degenerate: ``16 A^2 / (a b c (a + b + c))``
+    with ``A`` the area and ``a, b, c`` the edge lengths, the measure
+    pymeshlab's ``compute_selection_bad_faces`` uses.
     """
     L = _edge_lengths(V, F)
     area = face_areas(V, F)
@@ -193,76 +184,6 @@ def aspect_ratios(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         q = np.where(denom > 0, 16.0 * area**2 / np.where(denom > 0, denom, 1.0), 0.0)
     return q
-
-
-def _undirected_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unique sorted edges (e, 2), the face-edge to edge map (3m,) and edge face counts (e,)."""
-    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    E = np.sort(E, axis=1)
-    uniq, inverse, counts = np.unique(E, axis=0, return_inverse=True, return_counts=True)
-    return uniq, inverse.reshape(-1), counts
-
-
-def _fans_per_vertex(F: np.ndarray, n: int) -> np.ndarray:
-    """Number of face fans around each vertex (1 = manifold, 0 = unused, >1 = non-manifold).
-
-    Corners of one vertex are linked when their faces share an edge at that
-    vertex; each connected group of corners is one fan.
-    """
-    m = len(F)
-    if m == 0:
-        return np.zeros(n, dtype=np.int64)
-    corner_vertex = F.reshape(-1)  # corner c = 3 f + k
-    nxt = np.roll(F, -1, axis=1).reshape(-1)
-    prv = np.roll(F, 1, axis=1).reshape(-1)
-    corners = np.arange(3 * m)
-    # each corner touches two edges at its vertex: (v, next) and (v, prev)
-    keys = np.concatenate(
-        [
-            np.stack([corner_vertex, nxt], axis=1),
-            np.stack([corner_vertex, prv], axis=1),
-        ]
-    )
-    owner = np.concatenate([corners, corners])
-    _, group = np.unique(keys, axis=0, return_inverse=True)
-    group = group.reshape(-1)
-    order = np.argsort(group, kind="stable")
-    g = group[order]
-    same = np.flatnonzero(g[1:] == g[:-1])
-    a, b = owner[order[same]], owner[order[same + 1]]
-    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(3 * m, 3 * m))
-    _, label = connected_components(graph, directed=False)
-    pairs = np.unique(np.stack([corner_vertex, label], axis=1), axis=0)
-    return np.bincount(pairs[:, 0], minlength=n)
-
-
-def _components(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Component label of each face (m,) and face count per component (largest first)."""
-    m = len(F)
-    rows = np.repeat(np.arange(m), 3)
-    graph = coo_matrix((np.ones(3 * m), (rows, m + F.reshape(-1))), shape=(m + n, m + n))
-    _, label = connected_components(graph, directed=False)
-    face_label = label[:m]
-    _, face_label = np.unique(face_label, return_inverse=True)
-    sizes = np.bincount(face_label)
-    return face_label, sizes
-
-
-def _inconsistent_edges(F: np.ndarray) -> int:
-    """Directed edges traversed by more than one face (neighbours oriented oppositely)."""
-    if not len(F):
-        return 0
-    directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    _, count = np.unique(directed, axis=0, return_counts=True)
-    return int((count > 1).sum())
-
-
-def _duplicate_vertex_count(V: np.ndarray, used: np.ndarray) -> int:
-    """Referenced vertices whose coordinates repeat those of an earlier referenced vertex."""
-    P = V[used]
-    if not len(P):
-        return 0
-    return int(len(P) - len(np.unique(P, axis=0)))
 
 
 def diagnose(mesh: Any, *, sliver_ratio: float = SLIVER_RATIO) -> dict:
@@ -318,11 +239,11 @@ def diagnose(mesh: Any, *, sliver_ratio: float = SLIVER_RATIO) -> dict:
     unique_faces, first, dup_count = np.unique(
         np.sort(F[good], axis=1), axis=0, return_index=True, return_counts=True
     )
-    edges, _, edge_faces = _undirected_edges(unique_faces)
+    edges, _, edge_faces = topology.edges(unique_faces, n)
     used = np.zeros(n, dtype=bool)
     used[F.reshape(-1)] = True
-    fans = _fans_per_vertex(unique_faces, n)
-    _, comp_sizes = _components(F, n)
+    fans = topology.fan_counts(unique_faces, n)
+    _, comp_sizes = topology.components(F, n)
     comp_sizes = np.sort(comp_sizes)[::-1]
     lengths = np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1) if len(edges) else []
     problems = {
@@ -332,15 +253,17 @@ def diagnose(mesh: Any, *, sliver_ratio: float = SLIVER_RATIO) -> dict:
         "duplicate_faces": int((dup_count - 1).sum()),
         "non_manifold_edges": int((edge_faces > 2).sum()),
         "non_manifold_vertices": int((fans > 1).sum()),
-        "inconsistent_orientation": _inconsistent_edges(F[good][first]),
+        "inconsistent_orientation": topology.repeated_directed_edges(F[good][first], n),
         "unreferenced_vertices": int((~used).sum()),
-        "duplicate_vertices": _duplicate_vertex_count(V, used),
+        "duplicate_vertices": topology.repeated_rows(V[used]),
     }
     loops = None
     if problems["non_manifold_edges"] == 0 and good.any():
+        # a closed surface has no loops: libigl (and its start-up time) is not needed then
+        open_edges = (edge_faces == 1).any()
         loops = [
             {"size": int(len(lp)), "length": polyline_length(V[lp], True)}
-            for lp in boundary_loops(F[good])
+            for lp in (boundary_loops(F[good]) if open_edges else [])
         ]
     diag = float(np.linalg.norm(np.ptp(V[used], axis=0))) if used.any() else 0.0
     return {
@@ -549,7 +472,7 @@ def _manifold_edges(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int]:
     """
     if not len(F):
         return F, 0
-    edges, inverse, counts = _undirected_edges(F)
+    edges, inverse, counts = topology.edges(F)
     bad = np.flatnonzero(counts > 2)
     if not bad.size:
         return F, 0
@@ -621,6 +544,18 @@ def _apply(ms, counts: dict, key: str, measure: str, filter_name: str, **params)
     counts[key] += int(change)
     if measure != "removed_faces":
         counts["zero_area_faces"] += int(b[1] - a[1])
+
+
+def _split_non_manifold_vertices(ms, counts: dict) -> None:
+    """pymeshlab's repair of vertices with several fans (a copy per fan, none moved)."""
+    _apply(
+        ms,
+        counts,
+        "non_manifold_vertices",
+        "added_vertices",
+        "meshing_repair_non_manifold_vertices",
+        vertdispratio=0.0,
+    )
 
 
 def clean(
@@ -722,14 +657,7 @@ def clean(
     V, F, source = _arrays(ms)
     F, counts["non_manifold_edge_faces"] = _manifold_edges(V, F)
     ms = _meshset(ml, V, F, source)
-    _apply(
-        ms,
-        counts,
-        "non_manifold_vertices",
-        "added_vertices",
-        "meshing_repair_non_manifold_vertices",
-        vertdispratio=0.0,
-    )
+    _split_non_manifold_vertices(ms, counts)
     V, F, source = _arrays(ms)
     F, counts["faces_reoriented"] = _orient(F)
     slivers = aspect_ratios(V, F) < sliver_ratio
@@ -746,14 +674,7 @@ def clean(
                 ms, counts, "sliver_faces_removed", "removed_faces", "meshing_remove_selected_faces"
             )
             # a removed face can leave a vertex with two fans
-            _apply(
-                ms,
-                counts,
-                "non_manifold_vertices",
-                "added_vertices",
-                "meshing_repair_non_manifold_vertices",
-                vertdispratio=0.0,
-            )
+            _split_non_manifold_vertices(ms, counts)
             V, F, source = _arrays(ms)
     if not len(F):
         raise MeshError(
@@ -761,7 +682,7 @@ def clean(
             "non-manifold faces; the mesh holds no usable surface"
         )
     if min_component_faces > 0:
-        label, sizes = _components(F, len(V))
+        label, sizes = topology.components(F, len(V))
         limit = min(int(min_component_faces), int(sizes.max()))
         drop = sizes[label] < limit
         counts["small_component_faces"] = int(drop.sum())
@@ -847,7 +768,7 @@ def _separate_touching(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int]:
     shared = counts[inverse] > 1
     if not shared.any():
         return V, 0
-    edges, _, _ = _undirected_edges(F)
+    edges, _, _ = topology.edges(F)
     mean_edge = float(np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1).mean())
     out = V.copy()
     seen: set[int] = set()
@@ -919,7 +840,7 @@ class ResampleReport:
 
 
 def _edge_stats(V: np.ndarray, F: np.ndarray) -> dict:
-    edges, _, counts = _undirected_edges(F)
+    edges, _, counts = topology.edges(F)
     lengths = np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1)
     border = lengths[counts == 1]
     return {
@@ -998,7 +919,7 @@ def _check_resample_size(m: Mesh, target: float) -> None:
     area = 0.5 * float(np.linalg.norm(np.cross(e1, e2), axis=1).sum())
     predicted = area / (math.sqrt(3.0) / 4.0 * target * target)
     if predicted > MAX_RESAMPLE_FACES:
-        edges, _, _ = _undirected_edges(m.F)
+        edges, _, _ = topology.edges(m.F)
         mean = float(np.linalg.norm(m.V[edges[:, 0]] - m.V[edges[:, 1]], axis=1).mean())
         smallest = math.sqrt(area / (math.sqrt(3.0) / 4.0 * MAX_RESAMPLE_FACES))
         raise MeshError(
@@ -1081,7 +1002,7 @@ def resample(
     ml = _pymeshlab("igljoin.clean.resample (remeshing)")
     before = _edge_stats(m.V, m.F)
     loops_in = boundary_loops(m.F)
-    edges, _, _ = _undirected_edges(m.F)
+    edges, _, _ = topology.edges(m.F)
     longest = float(np.linalg.norm(m.V[edges[:, 0]] - m.V[edges[:, 1]], axis=1).max())
     split = 4.0 / 3.0 * target
     subdivisions = 0

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from .polyline import mean_segment
+
 __all__ = [
     "SeamFrames",
     "face_normals_areas",
@@ -79,7 +81,13 @@ def face_normals_areas(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.nda
     with the operations, in the order, of ``np.cross`` (each component one
     rounded product minus another) and ``np.linalg.norm(c, axis=1)`` (the
     squares summed left to right), so the values are those of that
-    row-wise formulation, to the last bit.
+    row-wise formulation, to the last bit. Kept for its speed, measured on
+    the arguments the joins pass (23 calls per join; medians on this
+    machine): 0.74-1.55 ms in all against 2.2-5.6 ms with ``np.cross``,
+    +1.5 ms of a 31 ms half-resolution paper join (4.7 %), +2.5 to +4.1 ms
+    of a 176-189 ms paper join (1.4-2.1 %); in joins run two at a time on
+    two busy cores, going back to ``np.cross`` made paper joins about 4 %
+    slower (median of 84 paired joins).
     """
     c = face_cross_products(V, F)
     length = _lengths(c)
@@ -101,20 +109,12 @@ def _lengths(c: np.ndarray) -> np.ndarray:
 
 
 def face_cross_products(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Edge cross product of each face, coordinate-major.
+    """Edge cross product of each face ``F`` (m, 3) of ``V`` (n, 3), coordinate-major (3, m).
 
-    Parameters
-    ----------
-    V : ndarray, shape (n, 3)
-    F : ndarray of int, shape (m, 3)
-
-    Returns
-    -------
-    ndarray, shape (3, m)
-        Row ``i`` is coordinate ``i`` of
-        ``(V[F[:, 1]] − V[F[:, 0]]) × (V[F[:, 2]] − V[F[:, 0]])``: twice the
-        area times the unit normal, rounded as ``np.cross`` rounds it (in
-        the dtype of ``V``).
+    Row ``i`` is coordinate ``i`` of
+    ``(V[F[:, 1]] − V[F[:, 0]]) × (V[F[:, 2]] − V[F[:, 0]])``: twice the area
+    times the unit normal, rounded as ``np.cross`` rounds it (in the dtype
+    of ``V``).
     """
     VT = np.ascontiguousarray(np.asarray(V).T)  # (3, n)
     FT = np.ascontiguousarray(np.asarray(F).T)  # (3, m)
@@ -257,8 +257,7 @@ def seam_frames(
     n = unit(W @ normals)
     span = 1
     if radius is not None and radius > 0:
-        seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
-        mean_edge = float(seg.mean()) if seg.size else radius
+        mean_edge = mean_segment(P, closed=False) if len(P) > 1 else radius
         span = int(np.clip(round(radius / max(mean_edge, 1e-300)), 1, max(1, len(P) // 4)))
     T = _curve_tangents(P, closed, span)
     if radius is not None and radius > 0:

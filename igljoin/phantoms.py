@@ -65,9 +65,11 @@ import igl
 import igl.triangle
 import numpy as np
 
+from . import topology
 from .boundary import Curve, boundary_loops
 from .errors import CurveError, MeshError, OptionsError
 from .mesh import Mesh
+from .polyline import polyline_length
 
 __all__ = [
     "LENGTH_RATIOS",
@@ -160,28 +162,6 @@ def ellipse_scale_for_perimeter(a: float, b: float, perimeter: float) -> float:
             f"b={b}, perimeter={perimeter}"
         )
     return float(perimeter) / float(p0)
-
-
-def polyline_length(points, closed: bool = True) -> float:
-    """Length of a polyline.
-
-    Parameters
-    ----------
-    points : array_like, shape (k, d)
-        Ordered points.
-    closed : bool
-        Whether the segment from the last point back to the first counts.
-
-    Returns
-    -------
-    float
-    """
-    P = np.asarray(points, dtype=np.float64)
-    if P.shape[0] < 2:
-        return 0.0
-    Q = np.roll(P, -1, axis=0) if closed else P[1:]
-    P = P if closed else P[:-1]
-    return float(np.linalg.norm(Q - P, axis=1).sum())
 
 
 def _ellipse_points(a: float, b: float, n: int, *, clockwise: bool = False) -> np.ndarray:
@@ -313,7 +293,7 @@ def _safe_displacement(
 
 def _mean_edge_length(P: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Mean length of the edges incident to each vertex, shape (n,)."""
-    E = np.unique(np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    E = topology.edges(F)[0]
     L = np.linalg.norm(P[E[:, 0]] - P[E[:, 1]], axis=1)
     n = P.shape[0]
     total = np.bincount(E.ravel(), weights=np.repeat(L, 2), minlength=n)

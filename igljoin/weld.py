@@ -30,10 +30,12 @@ from typing import TYPE_CHECKING
 import igl
 import numpy as np
 
-from . import metrics
+from . import metrics, topology
 from .correspond import split_boundary_faces
 from .errors import CurveError, WeldError
 from .mesh import Mesh
+from .polyline import mean_segment
+from .validate import relative_area_floor
 
 if TYPE_CHECKING:
     from .result import JoinResult
@@ -48,9 +50,6 @@ GUEST = 1
 #: A guest seam vertex may be this many host seam edge lengths off the host
 #: curve (the seam is a hard constraint: only rounding separates them).
 SEAM_TOLERANCE = 1e-6
-
-#: Faces with less than this fraction of the mean face area count as degenerate.
-AREA_FLOOR = 1e-12
 
 _SHOWN = 10  # offending vertices listed in an error message
 
@@ -247,8 +246,7 @@ def weld(result: JoinResult, *, check: bool = True) -> Welded:
         a, b = hc[e], hc[(e + 1) % k]
         P = Vh[a] * (1.0 - t)[:, None] + Vh[b] * t[:, None]
         P[hit] = Vh[hc[at_vertex[hit]]]
-        seg = np.diff(Vh[np.append(hc, hc[0]) if closed else hc], axis=0)
-        scale = float(np.linalg.norm(seg, axis=1).mean())
+        scale = mean_segment(Vh[hc], closed)
         gap = np.linalg.norm(X[seam] - P, axis=1)
         off = np.flatnonzero(gap > SEAM_TOLERANCE * scale)
         if off.size:
@@ -395,111 +393,16 @@ def _offenders(welded: Welded, vertices: np.ndarray) -> str:
     )
 
 
-def _fans(F, n):
-    """Edge-manifoldness and, per vertex, whether its faces form one edge-connected fan.
-
-    The faces at a vertex ``v`` are linked when they share an edge (as
-    ``igl.is_vertex_manifold`` links them); faces that both hold ``v``
-    share an edge exactly when they share a second vertex. The vertex is
-    manifold when the links join all its faces (union-find per vertex).
-
-    Parameters
-    ----------
-    F : ndarray of int64, shape (m, 3)
-        Faces using every vertex ``0 .. n − 1``, none repeating a vertex.
-    n : int
-
-    Returns
-    -------
-    edge_manifold : bool
-        No edge has more than two faces (``igl.is_edge_manifold``).
-    vertex_manifold : ndarray of bool, shape (n,)
-        ``igl.is_vertex_manifold``.
-    """
-    m = F.shape[0]
-    # faces at each vertex, in CSR form
-    start = np.zeros(n + 1, dtype=np.int64)
-    for f in range(m):
-        for c in range(3):
-            start[F[f, c] + 1] += 1
-    for v in range(n):
-        start[v + 1] += start[v]
-    at = np.empty(3 * m, dtype=np.int64)
-    fill = start[:-1].copy()
-    for f in range(m):
-        for c in range(3):
-            at[fill[F[f, c]]] = f
-            fill[F[f, c]] += 1
-    edge_manifold = True
-    vertex_manifold = np.zeros(n, dtype=np.bool_)
-    parent = np.empty(3 * m, dtype=np.int64)  # union-find over the faces at one vertex
-    seen = np.full(n, -1, dtype=np.int64)  # slot of a face at the vertex holding each vertex
-    count = np.zeros(n, dtype=np.int64)  # faces at the vertex holding each vertex
-    for v in range(n):
-        lo, hi = start[v], start[v + 1]
-        for s in range(lo, hi):
-            parent[s] = s
-        for s in range(lo, hi):
-            f = at[s]
-            for c in range(3):
-                x = F[f, c]
-                if x == v:
-                    continue
-                count[x] += 1
-                if seen[x] < 0:
-                    seen[x] = s
-                    continue
-                a, b = s, seen[x]
-                while parent[a] != a:
-                    a = parent[a]
-                while parent[b] != b:
-                    b = parent[b]
-                parent[max(a, b)] = min(a, b)
-        roots = 0
-        for s in range(lo, hi):
-            if parent[s] == s:
-                roots += 1
-            f = at[s]
-            for c in range(3):
-                x = F[f, c]
-                if x != v:
-                    if count[x] > 2:
-                        edge_manifold = False
-                    count[x] = 0
-                    seen[x] = -1
-        vertex_manifold[v] = roots == 1
-    return edge_manifold, vertex_manifold
-
-
-def _manifold_checks(F: np.ndarray, n: int):
-    """:func:`_fans` of faces ``F`` (m, 3) on vertices ``0 .. n − 1``, or ``None``.
-
-    ``None`` without numba or when a face repeats a vertex (libigl then decides).
-    """
-    if _fans_compiled is None:
-        return None
-    FT = np.ascontiguousarray(F.T)
-    if ((FT[0] == FT[1]) | (FT[1] == FT[2]) | (FT[2] == FT[0])).any():
-        return None
-    return _fans_compiled(np.ascontiguousarray(F, dtype=np.int64), n)
-
-
-try:
-    import numba as _nb
-except ImportError:  # without numba libigl runs both manifold checks
-    _nb = None
-#: :func:`_fans` compiled by numba (cached on disk), or ``None`` without numba.
-_fans_compiled = None if _nb is None else _nb.njit(cache=True)(_fans)
-
-
 def check_welded(welded: Welded, *, full: bool = False) -> None:
     """Raise :class:`WeldError` unless the welded mesh is a clean oriented manifold.
 
-    Checks, with libigl where it has the routine: every edge has one or two
-    faces (``igl.is_edge_manifold``), the faces around every vertex form one
-    fan (``igl.is_vertex_manifold``), every interior edge is used once in
-    each direction (consistent orientation), and no face has zero area
-    (``igl.doublearea``).
+    Checks that every edge has one or two faces and the faces around every
+    vertex form one fan (:func:`igljoin.topology.edges`,
+    :func:`igljoin.topology.vertex_manifold`, as ``igl.is_edge_manifold`` and
+    ``igl.is_vertex_manifold`` decide), that every interior edge is used once
+    in each direction (consistent orientation), and that no face has zero
+    area (``igl.doublearea`` against
+    :data:`igljoin.validate.relative_area_floor`).
 
     Parameters
     ----------
@@ -523,39 +426,28 @@ def check_welded(welded: Welded, *, full: bool = False) -> None:
     at_seam = None if full else metrics.ring_band(F, welded.seam, 1)
     sub = F if full else F[at_seam]
     # both manifold checks are combinatorial: run them on the sub-mesh's own vertex ids
-    # (ascending, as np.unique numbers them), first by _fans (cheap), then, where it finds
-    # a problem or cannot run, by libigl for the message
     in_sub = np.zeros(n, dtype=bool)
     in_sub[sub.reshape(-1)] = True
     ids = np.flatnonzero(in_sub)
     lookup = np.zeros(n, dtype=np.int64)
     lookup[ids] = np.arange(len(ids))
     local = lookup[sub]
-    used = np.zeros(n, dtype=bool)
-    used[(F if full else welded.seam).reshape(-1)] = True
-    fans = _manifold_checks(local, len(ids))
-    edges_ok = fans is not None and fans[0]
-    vertices_ok = (
-        fans is not None and used[ids].sum() == used.sum() and bool(fans[1][used[ids]].all())
-    )
-    manifold = True
-    if not edges_ok:
-        # libigl flags the *manifold* edges True in BE
-        manifold, _, E, _, BE = igl.is_edge_manifold(local)
-        E = ids[np.asarray(E, dtype=np.int64)]
-        crowded = ~np.asarray(BE, dtype=bool).reshape(-1)
-    if not manifold:
+    half = topology.half_edges(local, len(ids))
+    start, faces_at_edge = topology.runs(half[3])
+    crowded = faces_at_edge > 2
+    if crowded.any():
+        E = np.stack(np.divmod(half[3][start[crowded]], len(ids)), axis=1)
         raise WeldError(
             f"weld: {int(crowded.sum())} edges have more than two faces "
-            f"{_offenders(welded, E[crowded])}; a guest triangle across the seam duplicates a host "
-            "edge there — refine the guest near the seam (igljoin.clean) or pick curves that "
-            "do not cut corners"
+            f"{_offenders(welded, ids[E])}; a guest triangle across the seam duplicates "
+            "a host edge there — refine the guest near the seam (igljoin.clean) or pick curves "
+            "that do not cut corners"
         )
-    bad = np.zeros(0, dtype=np.int64)
-    if not vertices_ok:
-        vm = np.zeros(n, dtype=bool)
-        vm[ids] = np.asarray(igl.is_vertex_manifold(local), dtype=bool).reshape(-1)
-        bad = np.flatnonzero(~vm & used)
+    used = np.zeros(n, dtype=bool)
+    used[(F if full else welded.seam).reshape(-1)] = True
+    vm = np.zeros(n, dtype=bool)
+    vm[ids] = topology.vertex_manifold(local, len(ids), half)
+    bad = np.flatnonzero(~vm & used)
     if bad.size:
         raise WeldError(
             f"weld: {bad.size} vertices join separate fans of faces {_offenders(welded, bad)}; "
@@ -573,7 +465,7 @@ def check_welded(welded: Welded, *, full: bool = False) -> None:
         )
     checked = F if full else F[at_seam | (welded.label == GUEST)]
     area = igl.doublearea(V, checked)
-    floor = AREA_FLOOR * max(float(area.mean()), 1e-300)
+    floor = relative_area_floor * max(float(area.mean()), 1e-300)
     flat = np.flatnonzero(~(area > floor))
     if flat.size:
         raise WeldError(

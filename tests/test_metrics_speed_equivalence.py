@@ -2,11 +2,11 @@
 
 The metrics, the weld and its self-intersection count were sped up by
 computing on contiguous coordinate arrays, on the faces at a curve only, on
-cached host values, on candidate pairs instead of all pairs, with compiled
-manifold checks, and with a floating-point pre-check that keeps clean faces
-away from CGAL. Each test runs a fast path next to a reference computation
-(the plain code it replaced, kept below, or libigl / CGAL themselves) and
-compares. Tolerances are zero throughout: the fast paths perform the same
+cached host values, on candidate pairs instead of all pairs, with the manifold
+checks of :mod:`igljoin.topology` instead of libigl's, and with a floating-point
+pre-check that keeps clean faces away from CGAL. Each test runs a fast path next
+to a reference computation (the plain code it replaced, kept below, or libigl /
+CGAL themselves) and compares. Tolerances are zero throughout: the fast paths perform the same
 floating-point operations in the same order (or select among identical
 values), so every float is compared bit for bit and every count exactly.
 """
@@ -24,7 +24,7 @@ import pytest
 import scipy.sparse as sp
 
 import igljoin
-from igljoin import frames, metrics, phantoms
+from igljoin import frames, metrics, phantoms, topology
 from igljoin.correspond import rigid_fit
 from igljoin.mesh import Mesh
 
@@ -406,7 +406,7 @@ def _libigl_checks(F):
     )
 
 
-def test_compiled_manifold_checks_match_libigl():
+def test_topology_manifold_checks_match_libigl():
     rng = np.random.default_rng(6)
     G = phantoms.paper_sample("partial_patch", "equal", resolution=0.4).guest.F
     seen = set()
@@ -428,46 +428,11 @@ def test_compiled_manifold_checks_match_libigl():
             H = np.where(np.isin(H - G.max() - 1, glue), H - G.max() - 1, H)
             F = np.vstack([G, H])
         edge_ok, vertex_ok, local, n = _libigl_checks(F)
-        got = weld_mod._manifold_checks(local, n)
-        assert got is not None
+        got = (bool((topology.edges(local, n)[2] <= 2).all()), topology.vertex_manifold(local, n))
         assert got[0] == edge_ok
         _assert_same(got[1], vertex_ok)
         seen.add((edge_ok, bool(vertex_ok.all())))
     assert len(seen) == 4  # every combination of outcomes was exercised
-    assert weld_mod._manifold_checks(np.array([[0, 1, 1], [1, 2, 3]]), 4) is None
-
-
-def _weld_error(res):
-    try:
-        weld_mod.weld(res)
-    except igljoin.WeldError as exc:
-        return str(exc)
-    return None
-
-
-def test_weld_errors_are_those_of_libigl(monkeypatch):
-    s = phantoms.paper_sample("end_to_end", "equal", resolution=0.5)
-    res = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve)
-    on = np.isin(res.guest.F, res.seam).sum(axis=1)
-    f2, f1 = int(np.flatnonzero(on == 2)[0]), int(np.flatnonzero(on == 1)[0])
-
-    def with_faces(F, ratio):
-        attrs = dict(res.guest.vertex_attributes)
-        return dataclasses.replace(res, guest=Mesh(res.guest.V, F, attrs), area_ratio=ratio)
-
-    G, ratio = res.guest.F, res.area_ratio
-    seam_vertex = int(G[f1][np.isin(G[f1], res.seam)][0])
-    broken = [
-        with_faces(np.vstack([G, G[f2]]), np.append(ratio, 1.0)),  # an edge with three faces
-        with_faces(np.vstack([G, [[seam_vertex, 0, 1]]]), np.append(ratio, 1.0)),  # second fan
-        with_faces(np.delete(G, f2, axis=0), np.delete(ratio, f2)),  # a hole at the seam
-        with_faces(np.vstack([G[:-1], G[-1:, ::-1]]), ratio),  # one face reversed
-        res,
-    ]
-    fast = [_weld_error(r) for r in broken]
-    monkeypatch.setattr(weld_mod, "_fans_compiled", None)  # libigl alone, as before
-    assert [_weld_error(r) for r in broken] == fast
-    assert fast[-1] is None and fast[0] and fast[1] and fast[3]
 
 
 def test_seam_orientation_counts_only_need_the_seam_faces(joins):

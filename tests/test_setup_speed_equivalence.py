@@ -20,7 +20,7 @@ import pytest
 import igljoin
 from igljoin import boundary as boundary_mod
 from igljoin import correspond as corr
-from igljoin import validate
+from igljoin import topology, validate
 from igljoin.boundary import SelectedCurve, arc_length_parameters, boundary_loops, select_curve
 from igljoin.errors import MeshError
 from igljoin.mesh import Mesh
@@ -76,7 +76,7 @@ def _relabel(F: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------
-# vertex manifoldness: validate.vertex_manifold against igl.is_vertex_manifold
+# vertex manifoldness: topology.vertex_manifold against igl.is_vertex_manifold
 # ----------------------------------------------------------------------------
 
 
@@ -84,7 +84,7 @@ def _assert_same_as_libigl(F, n=None):
     F = np.asarray(F, dtype=np.int64)
     n = int(F.max()) + 1 if n is None else n
     ref = np.asarray(igl.is_vertex_manifold(F), dtype=bool)  # sized by the largest index
-    got = validate.vertex_manifold(F, n)
+    got = topology.vertex_manifold(F, n)
     assert got.shape == (n,)
     np.testing.assert_array_equal(got[: len(ref)], ref)
     assert not got[len(ref) :].any()  # vertices past the largest index are unreferenced
@@ -339,12 +339,12 @@ def test_row_counts_and_its_fallback(monkeypatch):
     for w, n in [(2, 7), (3, 7), (3, 2**21 + 1)]:  # 2**21 + 1 cubed overflows an int64
         A = rng.integers(0, 7, size=(300, w)) * ((n - 1) // 6)
         want = np.unique(A, axis=0, return_counts=True)[1]
-        np.testing.assert_array_equal(validate._row_counts(A, n), want)
+        np.testing.assert_array_equal(topology.row_counts(A, n), want)
     # the fallback is the structured sort itself
     calls = []
     unique = np.unique
     monkeypatch.setattr(np, "unique", lambda *a, **k: calls.append(k) or unique(*a, **k))
-    validate._row_counts(np.zeros((3, 3), dtype=np.int64), 2**21 + 1)
+    topology.row_counts(np.zeros((3, 3), dtype=np.int64), 2**21 + 1)
     assert calls == [{"axis": 0, "return_counts": True}]
 
 
@@ -355,7 +355,7 @@ def test_shared_rows_match_unique_rows():
         P[rng.random(P.shape) < 0.2] *= -1.0  # flips zeros to -0.0 too
         _, inverse = np.unique(P, axis=0, return_inverse=True)
         want = np.bincount(inverse.ravel())[inverse.ravel()] > 1
-        np.testing.assert_array_equal(validate._shared_rows(P), want)
+        np.testing.assert_array_equal(topology.shared_rows(P), want)
 
 
 # ----------------------------------------------------------------------------

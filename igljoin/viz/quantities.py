@@ -13,14 +13,13 @@ from typing import Any
 import numpy as np
 
 from ..frames import seam_frames
-from ..metrics import edge_strain, vertex_strain
+from ..metrics import edge_strain, nonrigid_displacement, vertex_strain
 from ..terms import LocalState, unique_edges
 
 __all__ = [
     "cross_seam_directions",
     "seam_curves",
     "guest_fields",
-    "vertex_displacement",
     "vertex_edge_strain",
     "vertex_energy",
 ]
@@ -34,34 +33,13 @@ _RESULT_FIELDS = {
 
 
 def vertex_edge_strain(V0: np.ndarray, V1: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Mean relative length change of the edges at each vertex.
+    """Mean relative length change ``(ℓ′ − ℓ)/ℓ`` (n,) of the edges at each vertex.
 
-    Parameters
-    ----------
-    V0, V1 : ndarray, shape (n, 3)
-        Rest and deformed positions.
-    F : ndarray of int64, shape (m, 3)
-
-    Returns
-    -------
-    ndarray, shape (n,)
-        ``(ℓ′ − ℓ)/ℓ`` averaged over incident edges: > 0 stretched, < 0 shrunk.
+    ``V0``, ``V1`` (n, 3) are the rest and deformed positions, ``F`` (m, 3)
+    the faces; > 0 stretched, < 0 shrunk.
     """
     E = unique_edges(F)
     return np.nan_to_num(vertex_strain(E, edge_strain(V0, V1, E), len(V0)))
-
-
-def vertex_displacement(V0: np.ndarray, V1: np.ndarray) -> np.ndarray:
-    """Distance of each deformed vertex from the rigidly best-fitted rest guest, shape (n,).
-
-    The rigid motion is the least-squares rotation and translation of ``V0``
-    onto ``V1``, so only the deformation itself is measured.
-    """
-    c0, c1 = V0.mean(axis=0), V1.mean(axis=0)
-    U, _, Vt = np.linalg.svd((V0 - c0).T @ (V1 - c1))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
-    R = Vt.T @ D @ U.T
-    return np.linalg.norm(V1 - ((V0 - c0) @ R.T + c1), axis=1)
 
 
 def vertex_energy(solver: Any, X: np.ndarray) -> np.ndarray | None:
@@ -141,7 +119,7 @@ def guest_fields(result: Any, solver: Any = None) -> dict[str, np.ndarray]:
     if fields["edge strain"] is None:
         fields["edge strain"] = vertex_edge_strain(V0, V1, F)
     if fields["displacement"] is None:
-        fields["displacement"] = vertex_displacement(V0, V1)
+        fields["displacement"] = nonrigid_displacement(V0, V1)
     if fields["energy"] is None:
         fields["energy"] = vertex_energy(solver, V1)
     used = {name for names in _RESULT_FIELDS.values() for name in names}
