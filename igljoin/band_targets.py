@@ -46,6 +46,7 @@ SIGNIFICANCE_LEVEL = 0.975
 SMALLEST_REMOVED_DEG = 0.05
 
 
+
 def _arc_positions(P: np.ndarray, closed: bool) -> tuple[np.ndarray, float]:
     Q = np.vstack([P, P[:1]]) if closed else P
     seg = np.linalg.norm(np.diff(Q, axis=0), axis=1)
@@ -134,17 +135,16 @@ def kept_elevation(
     _, length = _arc_positions(targets, closed)
     correlated = max(1.0, reach * len(phi) / max(length, 1e-300))
     A = Hinv @ (B.T * W)  # coef = A @ phi
-    # the error of each φ: the larger of the fits' own standard error and the
-    # scatter of φ about the modes (which also holds what the fits' residuals miss,
-    # e.g. the facets of a coarse mesh), counted once per band of seam
+    # the error of each φ is that of its two band fits (from their residuals),
+    # counted once per fit-width of seam: neighbouring fits share their vertices
     independent = max(len(phi) / correlated, 1.0)
     dof = max(independent - B.shape[1], 1.0)
-    scatter = float(np.sum(W * (phi - B @ coef) ** 2)) * independent / dof
-    error2 = np.maximum(slope_error**2, scatter)
+    error2 = slope_error**2
     se = np.sqrt((A**2 @ error2) * correlated)
     from scipy.stats import t as student_t  # here: scipy.stats costs start-up time
 
-    # two-sided 95 % of Student's t with the scatter's degrees of freedom (2 for many)
+    # two-sided 95 % of Student's t over the independent fits less the modes: wider
+    # where a short seam holds few independent fits (about 2 standard errors for many)
     quantile = float(student_t.ppf(SIGNIFICANCE_LEVEL, dof))
     threshold = np.maximum(quantile * se, np.radians(SMALLEST_REMOVED_DEG))
     shrunk = np.sign(coef) * np.maximum(np.abs(coef) - threshold, 0.0)

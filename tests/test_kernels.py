@@ -118,7 +118,11 @@ def test_stretch_kernel_equals_numpy_with_a_collapsed_edge(tube):
 
 @pytest.mark.parametrize(
     "options",
-    [{}, {"smooth_mode": "paper"}, {"smooth_tolerance": 5.0}],
+    [
+        {"smooth_mode": "robust"},
+        {"smooth_mode": "paper"},
+        {"smooth_mode": "robust", "smooth_tolerance": 5.0},
+    ],
     ids=["robust", "paper", "wedge"],
 )
 def test_smooth_kernel_equals_numpy(tube, options):

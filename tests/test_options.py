@@ -231,6 +231,7 @@ _CHANGED = {
     "stretch_weight": 2.0,
     "smooth_weight": 3.0,
     "smooth_mode": "paper",
+    "smooth_band": 3.0,
     "smooth_radius": 2.0,
     "smooth_tolerance": 5.0,
     "laplacian": "cotangent",
