@@ -92,6 +92,8 @@ def kept_elevation(
     slope_error: np.ndarray,
     closed: bool,
     band: float,
+    join_angle: float | None = None,
+    join_side: str = "guest",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Elevation (radians) the join keeps at each seam vertex, and the one it removes.
 
@@ -110,6 +112,13 @@ def kept_elevation(
     closed : bool
     band : float
         Band width (mesh units).
+    join_angle : float, optional
+        Degrees: the guest is to leave the host at this elevation instead (the
+        coherent part of ``φ`` is replaced by it, the rest kept).
+    join_side : {"guest", "normal", "opposite"}
+        Sign of ``join_angle``: the side the rest guest lies on (the sign of its
+        mean elevation; the normal's side if that is zero), the host normal's
+        side, or the other.
 
     Returns
     -------
@@ -148,6 +157,11 @@ def kept_elevation(
     quantile = float(student_t.ppf(SIGNIFICANCE_LEVEL, dof))
     threshold = np.maximum(quantile * se, np.radians(SMALLEST_REMOVED_DEG))
     shrunk = np.sign(coef) * np.maximum(np.abs(coef) - threshold, 0.0)
+    if join_angle is not None:
+        # the coherent part is replaced by the angle asked for, on the side asked for
+        side = {"normal": 1.0, "opposite": -1.0}.get(join_side, np.sign(coef[0]) or 1.0)
+        kept = phi - B @ coef + side * np.radians(join_angle)
+        return kept, phi - kept
     removed = B @ shrunk
     return phi - removed, removed
 

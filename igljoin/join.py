@@ -611,8 +611,9 @@ class JoinSolver:
             for p, part in zip(self.pairs, parts)
         ]
         if opt.smooth and opt.smooth_weight > 0 and opt.smooth_mode == "band":
-            for p, part, band in zip(self.pairs, parts, self.bands):
-                terms.append(self._band_term(p.host_curve, part, band))
+            angles = self._join_angles()
+            for p, part, band, angle in zip(self.pairs, parts, self.bands, angles):
+                terms.append(self._band_term(p.host_curve, part, band, angle))
         elif opt.smooth and opt.smooth_weight > 0:
             for p, part, mean_edge in zip(self.pairs, parts, self.host_mean_edges):
                 hc = p.host_curve
@@ -640,7 +641,21 @@ class JoinSolver:
         self.factorizations += 1
         self.timings.update(correspond=t1 - t0, terms=t2 - t1, factor=self.solver.factor_seconds)
 
-    def _band_term(self, hc: SelectedCurve, part, band: float) -> SmoothJoinTerm:
+    def _join_angles(self) -> list:
+        """``join_angle`` per seam (None: the default smooth join)."""
+        angle, k = self.options.join_angle, len(self.pairs)
+        if not isinstance(angle, tuple):
+            return [angle] * k
+        if len(angle) != k:
+            raise OptionsError(
+                f"join_angle has {len(angle)} values for {k} seam{'s' if k != 1 else ''}; "
+                "give one per seam (None keeps a seam's default) or a single angle"
+            )
+        return list(angle)
+
+    def _band_term(
+        self, hc: SelectedCurve, part, band: float, angle: float | None = None
+    ) -> SmoothJoinTerm:
         """The band smooth-join term of one seam (:mod:`igljoin.band_targets`).
 
         The host's band-fitted tangent planes at the seam targets are tilted by
@@ -666,6 +681,8 @@ class JoinSolver:
             np.hypot(host_se, guest_fit.slope_error),
             hc.closed,
             band,
+            join_angle=angle,
+            join_side=opt.join_side,
         )
         self.crease_removed.append(np.degrees(np.abs(removed)))
         tolerance = float(opt.smooth_tolerance or 0.0)

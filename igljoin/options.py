@@ -12,6 +12,10 @@ from .errors import OptionsError
 
 __all__ = ["JoinOptions", "MAX_ITERATIONS", "MAX_WEIGHT"]
 
+#: Largest join angle, degrees: at 90° the guest would leave along the host's
+#: normal, where the side it turns to is no longer defined.
+MAX_JOIN_ANGLE = 89.0
+
 #: Largest shape, stretch or smooth weight. The three terms are summed into one
 #: quadratic form factored in float64 (16 significant digits): a weight 10^6
 #: times the others already leaves the others at 1e-10 of the system, below the
@@ -85,6 +89,17 @@ class JoinOptions:
         host curve vertex, as the paper does; a positive value fits a
         quadric to the host vertices within that many mean host seam edges
         instead, which follows the underlying surface rather than its noise.
+    join_angle : float or sequence of float, optional
+        Band mode: the angle in degrees (0 to 89) at which the guest leaves
+        the host, measured from the host's tangent plane continued across the
+        seam — 0 is the paper's smooth join, an end-to-side graft leaves its
+        vessel at 25–45°. One value for every seam, or one per seam (``None``
+        in a list keeps that seam's default). Default ``None``: remove the
+        crease the inputs meet at where it is coherent along the seam.
+    join_side : {"guest", "normal", "opposite"}
+        Towards which side of the host surface a positive ``join_angle``
+        turns: the side the rest guest lies on (default), the side of the
+        host's normal, or the other.
     smooth_tolerance : float, optional
         Robust mode: crease in degrees below which a cross-seam edge is left
         alone. ``None`` (default) is 0 with one-ring tangent planes and, with
@@ -143,6 +158,8 @@ class JoinOptions:
     smooth_band: float | None = _structural(None)
     smooth_radius: float = _structural(0.0)
     smooth_tolerance: float | None = _structural(None)
+    join_angle: Any = _structural(None)
+    join_side: str = _structural("guest")
     laplacian: str = _structural("uniform")
     rotation_aware: bool = _structural(True)
     stiffness: Any = _structural(None)
@@ -171,6 +188,7 @@ class JoinOptions:
                 f"snap_tolerance={self.snap_tolerance} must be below 0.5 (a fraction of a guest "
                 "edge); try the default 0.1"
             )
+        self._join_angle()
         if self.smooth_band is not None:
             self._number("smooth_band", low=0.0, strict=True)
         if self.smooth_tolerance is not None:
@@ -197,6 +215,7 @@ class JoinOptions:
             )
         for name, allowed in (
             ("smooth_mode", ("band", "robust", "paper")),
+            ("join_side", ("guest", "normal", "opposite")),
             ("laplacian", ("uniform", "cotangent")),
             ("stiffness_on", ("auto", "vertex", "face")),
             ("initial_guess", ("extend", "rigid")),
@@ -226,6 +245,32 @@ class JoinOptions:
                     "vertex or face, 1 = default tissue)"
                 )
             object.__setattr__(self, "stiffness", k)
+
+    def _join_angle(self) -> None:
+        """Check ``join_angle`` (None, a number, or one number or None per seam)."""
+        value = self.join_angle
+        if value is None:
+            return
+        many = isinstance(value, (list, tuple, np.ndarray))
+        values = list(value) if many else [value]
+        out = []
+        for v in values:
+            ok = v is None or (
+                isinstance(v, (int, float, np.integer, np.floating))
+                and not isinstance(v, bool)
+                and np.isfinite(float(v))
+                and 0.0 <= float(v) <= MAX_JOIN_ANGLE
+            )
+            if not ok:
+                raise OptionsError(
+                    f"join_angle={_short(value)} must be a number of degrees from 0 to "
+                    f"{MAX_JOIN_ANGLE:g} (the angle the guest leaves the host at), one per "
+                    "seam, or None for the default smooth join"
+                )
+            out.append(None if v is None else float(v))
+        if many and not out:
+            raise OptionsError("join_angle=[] is empty; give one angle per seam or None")
+        object.__setattr__(self, "join_angle", tuple(out) if many else out[0])
 
     def _number(
         self, name: str, low: float, strict: bool = False, high: float | None = None
