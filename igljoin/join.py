@@ -29,6 +29,7 @@ from .errors import CurveError, MeshError, OptionsError
 from .frames import SeamFrames, face_normals_areas, seam_frames, unit
 from .mesh import Mesh, as_mesh
 from .options import JoinOptions
+from .polyline import mean_segment
 from .result import JoinedSeam, JoinResult
 from .solve import LocalGlobalSolver
 from .stiffness import stiffness_from_attribute, stiffness_from_regions
@@ -586,8 +587,7 @@ class JoinSolver:
         self.host_mean_edges = []
         for p in self.pairs:
             hv = self.host.V[p.host_curve.indices]
-            seg = np.roll(hv, -1, axis=0) - hv if p.host_curve.closed else np.diff(hv, axis=0)
-            self.host_mean_edges.append(float(np.linalg.norm(seg, axis=1).mean()))
+            self.host_mean_edges.append(mean_segment(hv, p.host_curve.closed))
         self.host_mean_edge = float(np.mean(self.host_mean_edges))
         self.E = unique_edges(c.F)
         self.guest_mean_edge = float(

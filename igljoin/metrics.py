@@ -46,6 +46,7 @@ from scipy.spatial import cKDTree
 from .correspond import rigid_fit
 from .errors import OptionsError
 from .frames import face_areas, face_normals_areas, seam_frames
+from .polyline import mean_segment
 
 __all__ = [
     "area_ratio",
@@ -1012,8 +1013,7 @@ def seam_gap(seam_points: np.ndarray, host_points: np.ndarray, closed: bool) -> 
         (divided by the mean host seam edge).
     """
     d = point_polyline_distance(seam_points, host_points, closed)
-    seg = np.roll(host_points, -1, axis=0) - host_points if closed else np.diff(host_points, axis=0)
-    mean_edge = float(np.linalg.norm(seg, axis=1).mean())
+    mean_edge = mean_segment(host_points, closed)
     return {
         "max": float(d.max()),
         "mean": float(d.mean()),
