@@ -1,13 +1,16 @@
 """The surface beside a boundary curve, fitted over a band of stated width.
 
 At each vertex ``q`` of a boundary curve the surface on its one side is
-fitted, over the vertices within ``band`` of ``q``, as a quadratic map
-``X(u, v) ≈ q + a u + c v + ½(A u² + 2B uv + C v²)`` of the local coordinates
-``u`` (along the curve) and ``v`` (into the surface). The fit's derivative
-``c = ∂X/∂v`` at ``q`` is the direction in which the surface leaves the curve,
-measured at the scale of the band rather than of the triangles at ``q``:
-a sliver, a very short curve edge or a zig-zag curve changes it little,
-because it is a least-squares fit over every vertex of the band.
+fitted, over the vertices within ``band`` of ``q`` (less along the curve
+where the surface bends round it, as at a tube's end: :func:`along_curve_reach`),
+as a map ``X(u, v) ≈ q + a u + c v + …`` of the local coordinates ``u``
+(along the curve) and ``v`` (into the surface): a quadratic, and three terms
+more of the bend along the curve (``u³, u⁴, u²v``) where the band holds
+enough vertices. The fit's derivative ``c = ∂X/∂v`` at ``q`` is the
+direction in which the surface leaves the curve, measured at the scale of
+the band rather than of the triangles at ``q``: a sliver, a very short curve
+edge or a zig-zag curve changes it little, because it is a least-squares fit
+over every vertex of the band. The fit's residuals give its standard error.
 
 Because the local coordinates are fixed (taken from one configuration),
 ``c`` is a *linear* function of the vertex positions: :func:`band_fit`
@@ -218,6 +221,9 @@ def _orientation_side(F: np.ndarray, curve: np.ndarray, closed: bool) -> np.ndar
     if k < 2 or not len(F):
         return side
     n = int(max(F.max(), curve.max())) + 1
+    on = np.zeros(n, dtype=bool)
+    on[curve] = True
+    F = F[on[F].sum(axis=1) >= 2]  # only faces with a curve edge can hold one
     start = F.reshape(-1)
     end = F[:, [1, 2, 0]].reshape(-1)
     forward = set((start * n + end).tolist())
@@ -258,7 +264,6 @@ def band_fit(
     band: float,
     *,
     curve_points: np.ndarray | None = None,
-    inner: float = 0.0,
 ) -> BandFit:
     """Fit the surface beside a boundary curve over a band, at each curve vertex.
 
@@ -275,9 +280,6 @@ def band_fit(
     curve_points : ndarray, shape (k, 3), optional
         Positions that give the curve tangents (default ``V[curve]``), e.g. the
         host curve when fitting a guest that lies on it.
-    inner : float
-        Leave out the vertices nearer than this to the curve vertex (a shell
-        ``inner ≤ d ≤ band``); the fit is still taken at the curve vertex.
 
     Returns
     -------
@@ -308,12 +310,10 @@ def band_fit(
     if counts.sum():
         idx[valid] = near[np.concatenate([np.asarray(h, dtype=np.int64) for h in hits])]
     valid &= idx != curve[:, None]
-    # same sheet as the curve vertex, and outside the inner radius
+    # on the same sheet of the surface as the curve vertex
     n0 = VN[curve]
     valid &= np.einsum("kmj,kj->km", VN[idx], n0) > _SAME_SHEET_COS
     D = V[idx] - A[:, None, :]
-    if inner > 0:
-        valid &= np.einsum("kmj,kmj->km", D, D) >= inner * inner
     w_area = np.where(valid, 1.0, 0.0)
     n0 = unit(np.einsum("km,kmj->kj", w_area, VN[idx]) + n0)
     g0 = unit(np.cross(n0, T))
