@@ -959,8 +959,10 @@ class JoinSolver:
         rest = Mesh(c.V, c.F, name="rest guest")
         seams, per_seam, gaps = [], [], []
         start = 0
-        onering_all, measured_all, inputs_all = [], [], []
-        for p, part, band in zip(self.pairs, self.parts, self.bands):
+        onering_all, measured_all, inputs_all, off_angle_all = [], [], [], []
+        asked = self._join_angles() if self.options.smooth_mode == "band" else []
+        asked = asked if self.options.smooth else []
+        for i, (p, part, band) in enumerate(zip(self.pairs, self.parts, self.bands)):
             hc = p.host_curve
             s = len(part.seam)
             at_host = part.seam[part.host_hit]
@@ -974,6 +976,12 @@ class JoinSolver:
             measured_all.append(measured)
             inputs_all.append(inputs)
             onering_all.append(onering)
+            angle = asked[i] if asked else None
+            if angle is not None:
+                # how far the guest leaves the host from the angle asked for
+                off_angle_all.append(
+                    crease.CreaseMeasure(np.abs(measured.angles - angle), band, measured.noise)
+                )
             gap = metrics.seam_gap(X[part.seam], host.V[hc.indices], hc.closed)
             gaps.append(gap)
             dihedral = metrics.host_dihedral_angles(host.V, host.F, hc.indices)
@@ -1003,6 +1011,10 @@ class JoinSolver:
                     "crease_deg": crease.report([measured]),
                     "crease_onering_deg": metrics.summary(onering),
                     "input_crease_deg": crease.report([inputs]),
+                    "join_angle_deg": angle,
+                    "join_angle_error_deg": (
+                        crease.report([off_angle_all[-1]]) if angle is not None else None
+                    ),
                     "crease_removed_deg": metrics.summary(
                         self.crease_removed[len(per_seam)]
                         if self.crease_removed
@@ -1038,6 +1050,7 @@ class JoinSolver:
             "crease_deg": crease.report(measured_all),
             "crease_onering_deg": metrics.summary(np.concatenate(onering_all)),
             "input_crease_deg": crease.report(inputs_all),
+            "join_angle_error_deg": crease.report(off_angle_all) if off_angle_all else None,
             "host_dihedral_deg": {
                 **metrics.summary(host_dihedral),
                 "rings": metrics.HOST_DIHEDRAL_RINGS,

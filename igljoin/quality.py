@@ -269,6 +269,25 @@ def _beyond_noise(m: dict, key: str) -> float | None:
     return _number(m, key, "max") if value is None else value
 
 
+def _join_angle_warning(m: dict) -> list[QualityWarning]:
+    """``crease`` for a join at a given angle: the guest leaves the host at another one."""
+    off = _beyond_noise(m, "join_angle_error_deg")
+    if off is None or off <= CREASE_MAX_DEG:
+        return []
+    peak = _number(m, "join_angle_error_deg", "max")
+    return [
+        QualityWarning(
+            "crease",
+            f"the guest leaves the host up to {peak if peak is not None else off:.1f}° away "
+            f"from the join angle asked for (beyond {CREASE_MAX_DEG:g}° even less twice the "
+            "fits' noise): check that the curves correspond, and raise smooth_weight or "
+            "give the guest a rest shape nearer that angle",
+            off,
+            CREASE_MAX_DEG,
+        )
+    ]
+
+
 def _crease_warnings(m: dict, band_join: bool) -> list[QualityWarning]:
     """``crease`` or ``host_creased``: a crease in the result, made by the join or kept.
 
@@ -360,7 +379,12 @@ def assess(result: Any) -> tuple[QualityWarning, ...]:
         )
     opt = result.options
     kept = bool(getattr(opt, "smooth", False)) and getattr(opt, "smooth_mode", "") == "band"
-    out += _crease_warnings(m, kept and getattr(opt, "join_angle", None) is None)
+    if kept and getattr(opt, "join_angle", None) is not None:
+        # a crease was asked for: what counts is how far the guest is from it (a seam
+        # left at its default, None in the per-seam list, is not measured this way)
+        out += _join_angle_warning(m)
+    else:
+        out += _crease_warnings(m, kept)
     folds = _number(m, "folded_pairs")
     if folds is not None and folds > 0:
         out.append(
