@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bandfit import BAND_EDGES, band_fit, median_edge_near
+from .bandfit import BAND_EDGES, BandFit, band_fit, median_edge_near
 from .correspond import rigid_fit
 from .frames import unit
 
@@ -116,6 +116,7 @@ def seam_crease(
     closed: bool,
     band: float | None = None,
     rest: np.ndarray | None = None,
+    host_fit: BandFit | None = None,
 ) -> CreaseMeasure:
     """Crease between a guest lying on the host curve and the host, at band scale.
 
@@ -138,6 +139,8 @@ def seam_crease(
         coordinates (which band vertices, at which ``u, v``), as the smooth-join
         term does; the noise is that of the rest surface. Without it the guest
         is fitted as it lies (for a guest in place, the two agree).
+    host_fit : BandFit, optional
+        The host's band fit along ``host_curve`` at ``band``, if already made.
 
     Returns
     -------
@@ -145,7 +148,7 @@ def seam_crease(
     """
     if band is None:
         band = default_band(Vh, Fh, host_curve, Vg, Fg, guest_at_host)
-    host = band_fit(Vh, Fh, host_curve, closed, band)
+    host = host_fit or band_fit(Vh, Fh, host_curve, closed, band)
     if rest is not None:
         guest = band_fit(rest, Fg, guest_at_host, closed, band)
         c = guest.weights @ np.asarray(Vg, dtype=np.float64)
@@ -165,6 +168,7 @@ def input_crease(
     guest_at_host: np.ndarray,
     closed: bool,
     band: float,
+    host_fit: BandFit | None = None,
 ) -> CreaseMeasure:
     """Crease at which the rest guest, moved rigidly onto the host curve, meets the host.
 
@@ -177,6 +181,8 @@ def input_crease(
         As in :func:`seam_crease`, with ``Vg`` the rest guest.
     band : float
         Band width in mesh units.
+    host_fit : BandFit, optional
+        The host's band fit along ``host_curve`` at ``band``, if already made.
 
     Returns
     -------
@@ -187,7 +193,7 @@ def input_crease(
     Vh = np.asarray(Vh, dtype=np.float64)
     Vg = np.asarray(Vg, dtype=np.float64)
     R, _ = rigid_fit(Vg[guest_at_host], Vh[host_curve])
-    host = band_fit(Vh, Fh, host_curve, closed, band)
+    host = host_fit or band_fit(Vh, Fh, host_curve, closed, band)
     guest = band_fit(Vg, Fg, guest_at_host, closed, band)
     return _measure(guest, host, R)
 

@@ -653,6 +653,14 @@ class JoinSolver:
             )
         return list(angle)
 
+    def _host_fit(self, hc: SelectedCurve, band: float):
+        """The host's band fit along a curve, made once per solver (the host is rigid)."""
+        key = (hc.indices.tobytes(), bool(hc.closed), float(band))
+        cache = self.__dict__.setdefault("_host_fits", {})
+        if key not in cache:
+            cache[key] = band_fit(self.host.V, self.host.F, hc.indices, hc.closed, band)
+        return cache[key]
+
     def _band_term(
         self, hc: SelectedCurve, part, band: float, angle: float | None = None
     ) -> SmoothJoinTerm:
@@ -664,7 +672,7 @@ class JoinSolver:
         vertex is pulled into them. ``smooth_tolerance`` widens that into a wedge.
         """
         c, opt = self.corr, self.options
-        host_fit = band_fit(self.host.V, self.host.F, hc.indices, hc.closed, band)
+        host_fit = self._host_fit(hc, band)
         at_seam = _interpolate_frames(host_fit.frames, part.host_edge, part.host_edge_t, hc.closed)
         guest_fit = band_fit(c.V, c.F, part.seam, hc.closed, band)
         k = len(hc.indices)
@@ -966,11 +974,12 @@ class JoinSolver:
             hc = p.host_curve
             s = len(part.seam)
             at_host = part.seam[part.host_hit]
+            host_fit = self._host_fit(hc, band)
             measured = crease.seam_crease(
-                host.V, host.F, hc.indices, X, c.F, at_host, hc.closed, band, rest=c.V
+                host.V, host.F, hc.indices, X, c.F, at_host, hc.closed, band, c.V, host_fit
             )
             inputs = crease.input_crease(
-                host.V, host.F, hc.indices, c.V, c.F, at_host, hc.closed, band
+                host.V, host.F, hc.indices, c.V, c.F, at_host, hc.closed, band, host_fit
             )
             onering = metrics.crease_angles(host.V, host.F, hc.indices, X, c.F, at_host, hc.closed)
             measured_all.append(measured)

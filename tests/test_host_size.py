@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import sys
+import importlib
 
 import numpy as np
 import pytest
@@ -10,7 +10,7 @@ import pytest
 import igljoin
 from igljoin import phantoms
 
-join_module = sys.modules["igljoin.join"]  # the module (igljoin.join is also the function)
+join_module = importlib.import_module("igljoin.join")  # the module (igljoin.join is the function)
 
 
 @pytest.fixture(scope="module")
