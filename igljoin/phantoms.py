@@ -1305,8 +1305,10 @@ def bypass_graft_sample(
     >>> import igljoin
     >>> g = bypass_graft_sample()
     >>> res = igljoin.join(g.hosts, g.guest, seams=g.seams, join_angle=45)
-    >>> [round(float(sm.crease.mean())) for sm in res.seams]
-    [45, 45]
+    >>> [abs(float(sm.crease.mean()) - 45.0) < 2.0 for sm in res.seams]
+    [True, True]
+    >>> res.metrics["self_intersections"]["pairs"], res.metrics["folded_pairs"]
+    (0, 0)
     """
     b = _positive(bevel_deg, "bypass_graft_sample: bevel_deg")
     if b > 90.0:
