@@ -45,6 +45,7 @@ _LAZY = {
     "MeshReadError": "errors",
     "MissingExtraError": "errors",
     "OptionsError": "errors",
+    "QualityWarning": "quality",
     "SolveError": "errors",
     "SpecError": "errors",
     "WeldError": "errors",
@@ -62,9 +63,10 @@ _LAZY = {
 #: Submodules reachable as attributes (``igljoin.phantoms``) without an import statement,
 #: as they were when ``import igljoin`` imported everything.
 _SUBMODULES = (
-    "atomic", "boundary", "cli", "correspond", "demo", "errors", "frames", "io", "kernels",
-    "linsolve", "mesh", "metrics", "options", "phantoms", "pipeline", "result", "rotations",
-    "solve", "spec", "stiffness", "terms", "validate", "viz",
+    "atomic", "band_targets", "bandfit", "boundary", "cli", "correspond", "crease", "demo",
+    "errors", "frames", "io", "kernels", "linsolve", "mesh", "metrics", "options", "phantoms",
+    "pipeline", "plain", "polyline", "quality", "result", "rotations", "solve", "spec",
+    "stiffness", "terms", "topology", "validate", "viz",
 )  # fmt: skip
 
 __all__ = [
@@ -87,6 +89,7 @@ __all__ = [
     "MeshReadError",
     "MissingExtraError",
     "OptionsError",
+    "QualityWarning",
     "SolveError",
     "SpecError",
     "WeldError",
@@ -121,6 +124,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports
     from .join import JoinResult, JoinSolver, SolveProgress, join
     from .mesh import Mesh, as_mesh
     from .options import JoinOptions
+    from .quality import QualityWarning
     from .spec import CaseSpec, load_case
     from .stiffness import stiffness_from_regions
     from .weld import Welded, weld

@@ -27,7 +27,14 @@ from .bandfit import along_curve_reach
 from .correspond import rigid_fit
 from .frames import SeamFrames, unit
 
-__all__ = ["kept_elevation", "tilted_frames", "BANDS_PER_MODE", "MAX_MODE", "SIGNIFICANCE_LEVEL", "SMALLEST_REMOVED_DEG"]
+__all__ = [
+    "kept_elevation",
+    "tilted_frames",
+    "BANDS_PER_MODE",
+    "MAX_MODE",
+    "SIGNIFICANCE_LEVEL",
+    "SMALLEST_REMOVED_DEG",
+]
 
 #: A mode along the seam has at least this many band widths per half-period, so
 #: that it averages several independent band fits.
@@ -44,7 +51,6 @@ SIGNIFICANCE_LEVEL = 0.975
 #: below what a join needs and what a band fit resolves on any mesh, and chasing it
 #: only costs iterations (a tube joined to its exact continuation reads 3e-4°).
 SMALLEST_REMOVED_DEG = 0.05
-
 
 
 def _arc_positions(P: np.ndarray, closed: bool) -> tuple[np.ndarray, float]:

@@ -23,7 +23,6 @@ import numpy as np
 from .errors import CurveError
 from .mesh import Mesh
 from .polyline import arc_length_parameters, polyline_length
-from .polyline import segment_lengths as _segment_lengths  # noqa: F401 (igljoin.correspond)
 
 __all__ = [
     "Curve",

@@ -504,21 +504,10 @@ def _spec_from_args(parser: argparse.ArgumentParser, args: argparse.Namespace, h
         parser.error(str(exc).removeprefix("arguments: "))
 
 
-def _plain(value: Any) -> Any:
-    """JSON-ready copy (paths as strings)."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, Path):
-        return str(value)
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    return value
-
-
 def _print_json(data: Any) -> None:
-    print(json.dumps(_plain(data), indent=2, allow_nan=False))
+    from .plain import plain_json
+
+    print(json.dumps(plain_json(data), indent=2, allow_nan=False))
 
 
 def _fmt(value: Any, spec: str = ".3g", unit: str = "") -> str:

@@ -15,8 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .boundary import SelectedCurve, _segment_lengths, arc_length_parameters, polyline_length
+from .boundary import SelectedCurve
 from .errors import CurveError
+from .polyline import arc_length_parameters, polyline_length, segment_lengths
 
 __all__ = [
     "Correspondence",
@@ -299,7 +300,7 @@ def _resample_shifted(P: np.ndarray, shifts: np.ndarray, n: int) -> np.ndarray:
     shifts = np.asarray(shifts, dtype=np.int64)
     c = shifts.size
     walk = (shifts[:, None] + np.arange(k)[None, :]) % k  # (c, k) vertex of each position
-    seg = _segment_lengths(P, True)[walk]
+    seg = segment_lengths(P, True)[walk]
     cum = np.concatenate([np.zeros((c, 1)), np.cumsum(seg, axis=1)], axis=1)
     if not (cum[:, -1] > 0).all():
         return np.stack([_resample(P[row], True, n) for row in walk])

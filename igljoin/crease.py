@@ -30,7 +30,18 @@ from .bandfit import BAND_EDGES, band_fit, median_edge_near
 from .correspond import rigid_fit
 from .frames import unit
 
-__all__ = ["CreaseMeasure", "seam_crease", "input_crease", "default_band"]
+__all__ = [
+    "CreaseMeasure",
+    "seam_crease",
+    "input_crease",
+    "default_band",
+    "report",
+    "NOISE_SIGMAS",
+]
+
+#: Standard errors subtracted from a crease before it counts as one
+#: (``beyond_noise_max``): two, about 95 % one-sided.
+NOISE_SIGMAS = 2.0
 
 
 @dataclass(frozen=True)
@@ -179,3 +190,32 @@ def input_crease(
     host = band_fit(Vh, Fh, host_curve, closed, band)
     guest = band_fit(Vg, Fg, guest_at_host, closed, band)
     return _measure(guest, host, R)
+
+
+def report(measures: list[CreaseMeasure]) -> dict:
+    """Summary of one or more crease measures (e.g. one per seam) for a report.
+
+    Parameters
+    ----------
+    measures : list of CreaseMeasure
+
+    Returns
+    -------
+    dict
+        ``mean``, ``median``, ``p95``, ``min``, ``max`` of the angles (degrees);
+        ``band`` (the widest, mesh units); ``noise`` (the median standard
+        error, degrees); ``beyond_noise_max``: the largest angle less
+        :data:`NOISE_SIGMAS` of its standard errors — the largest crease the
+        fits can tell from their noise (what warnings read).
+    """
+    from .metrics import summary
+
+    angles = np.concatenate([m.angles for m in measures]) if measures else np.zeros(0)
+    noise = np.concatenate([m.noise for m in measures]) if measures else np.zeros(0)
+    clear = angles - NOISE_SIGMAS * noise
+    return {
+        **summary(angles),
+        "band": max((m.band for m in measures), default=None),
+        "noise": float(np.median(noise)) if noise.size else None,
+        "beyond_noise_max": float(clear.max()) if clear.size else None,
+    }

@@ -29,6 +29,7 @@ from .errors import CurveError, MeshError, OptionsError
 from .frames import SeamFrames, face_normals_areas, seam_frames, unit
 from .mesh import Mesh, as_mesh
 from .options import JoinOptions
+from .polyline import mean_segment
 from .result import JoinedSeam, JoinResult
 from .solve import LocalGlobalSolver
 from .stiffness import stiffness_from_attribute, stiffness_from_regions
@@ -586,8 +587,7 @@ class JoinSolver:
         self.host_mean_edges = []
         for p in self.pairs:
             hv = self.host.V[p.host_curve.indices]
-            seg = np.roll(hv, -1, axis=0) - hv if p.host_curve.closed else np.diff(hv, axis=0)
-            self.host_mean_edges.append(float(np.linalg.norm(seg, axis=1).mean()))
+            self.host_mean_edges.append(mean_segment(hv, p.host_curve.closed))
         self.host_mean_edge = float(np.mean(self.host_mean_edges))
         self.E = unique_edges(c.F)
         self.guest_mean_edge = float(
@@ -959,7 +959,7 @@ class JoinSolver:
         rest = Mesh(c.V, c.F, name="rest guest")
         seams, per_seam, gaps = [], [], []
         start = 0
-        onering_all, input_all, noise_all = [], [], []
+        onering_all, measured_all, inputs_all = [], [], []
         for p, part, band in zip(self.pairs, self.parts, self.bands):
             hc = p.host_curve
             s = len(part.seam)
@@ -967,14 +967,13 @@ class JoinSolver:
             measured = crease.seam_crease(
                 host.V, host.F, hc.indices, X, c.F, at_host, hc.closed, band, rest=c.V
             )
-            seam_crease = measured.angles
-            noise_all.append(measured.noise)
-            onering = metrics.crease_angles(host.V, host.F, hc.indices, X, c.F, at_host, hc.closed)
             inputs = crease.input_crease(
                 host.V, host.F, hc.indices, c.V, c.F, at_host, hc.closed, band
-            ).angles
+            )
+            onering = metrics.crease_angles(host.V, host.F, hc.indices, X, c.F, at_host, hc.closed)
+            measured_all.append(measured)
+            inputs_all.append(inputs)
             onering_all.append(onering)
-            input_all.append(inputs)
             gap = metrics.seam_gap(X[part.seam], host.V[hc.indices], hc.closed)
             gaps.append(gap)
             dihedral = metrics.host_dihedral_angles(host.V, host.F, hc.indices)
@@ -989,7 +988,7 @@ class JoinSolver:
                     host_edge=part.host_edge.copy(),
                     host_edge_t=part.host_edge_t.copy(),
                     inserted=len(part.inserted_t),
-                    crease=seam_crease,
+                    crease=measured.angles,
                     pairing=dict(p.pairing),
                 )
             )
@@ -1001,13 +1000,9 @@ class JoinSolver:
                     "host_curve": len(hc.indices),
                     "inserted": len(part.inserted_t),
                     "seam_gap": gap,
-                    "crease_deg": {
-                        **metrics.summary(seam_crease),
-                        "band": band,
-                        "noise": float(np.median(measured.noise)),
-                    },
+                    "crease_deg": crease.report([measured]),
                     "crease_onering_deg": metrics.summary(onering),
-                    "input_crease_deg": {**metrics.summary(inputs), "band": band},
+                    "input_crease_deg": crease.report([inputs]),
                     "crease_removed_deg": metrics.summary(
                         self.crease_removed[len(per_seam)]
                         if self.crease_removed
@@ -1040,16 +1035,9 @@ class JoinSolver:
         )
         m = {
             "seam_gap": _combined_gap(gaps, [len(sm.seam) for sm in seams]),
-            "crease_deg": {
-                **metrics.summary(seam_creases),
-                "band": max(self.bands),
-                "noise": float(np.median(np.concatenate(noise_all))),
-            },
+            "crease_deg": crease.report(measured_all),
             "crease_onering_deg": metrics.summary(np.concatenate(onering_all)),
-            "input_crease_deg": {
-                **metrics.summary(np.concatenate(input_all)),
-                "band": max(self.bands),
-            },
+            "input_crease_deg": crease.report(inputs_all),
             "host_dihedral_deg": {
                 **metrics.summary(host_dihedral),
                 "rings": metrics.HOST_DIHEDRAL_RINGS,

@@ -46,6 +46,7 @@ from scipy.spatial import cKDTree
 from .correspond import rigid_fit
 from .errors import OptionsError
 from .frames import face_areas, face_normals_areas, seam_frames
+from .polyline import mean_segment
 
 __all__ = [
     "area_ratio",
@@ -484,12 +485,11 @@ def self_intersections(V: np.ndarray, F: np.ndarray, faces: np.ndarray | None = 
     if sel.size < 2:
         return np.zeros((0, 2), dtype=np.int64)
     V = np.asarray(V, dtype=np.float64)
-    if _apart is not None:
-        sub = np.ascontiguousarray(F[sel])
-        corners = np.ascontiguousarray(np.take(V, sub, axis=0))  # (b, 3 corners, 3 coordinates)
-        sel = sel[~_apart(corners, sub)]
-        if sel.size < 2:
-            return np.zeros((0, 2), dtype=np.int64)
+    sub = np.ascontiguousarray(F[sel])
+    corners = np.ascontiguousarray(np.take(V, sub, axis=0))  # (b, 3 corners, 3 coordinates)
+    sel = sel[~_apart(corners, sub)]
+    if sel.size < 2:
+        return np.zeros((0, 2), dtype=np.int64)
     sub = F[sel]
     # the vertices used, ascending, and the faces renumbered onto them (as np.unique would)
     used = np.zeros(len(V), dtype=bool)
@@ -523,10 +523,7 @@ def self_intersections(V: np.ndarray, F: np.ndarray, faces: np.ndarray | None = 
 _SIGN_BOUND = 1e-12
 _SIGN_FLOOR = 1e-250
 
-try:
-    import numba as _nb
-except ImportError:  # without numba every tested face goes to CGAL
-    _nb = None
+import numba as _nb  # noqa: E402 (a hard dependency; here beside the kernels it compiles)
 
 
 def _sign(det: float, scale: float) -> int:
@@ -857,18 +854,16 @@ def _apart_faces(corners, F):
     return ~near
 
 
-#: ``_apart(corners, F)``: :func:`_apart_faces` compiled by numba (cached on disk), or
-#: ``None`` without numba. The helpers it calls are compiled in place first.
-_apart = None
-if _nb is not None:
-    _sign = _nb.njit(cache=True, inline="always")(_sign)
-    _side = _nb.njit(cache=True, inline="always")(_side)
-    _planes = _nb.njit(cache=True)(_planes)
-    _orient2d = _nb.njit(cache=True, inline="always")(_orient2d)
-    _plane_side = _nb.njit(cache=True, inline="always")(_plane_side)
-    _wedges_apart = _nb.njit(cache=True)(_wedges_apart)
-    _pair_apart = _nb.njit(cache=True, inline="always")(_pair_apart)
-    _apart = _nb.njit(cache=True)(_apart_faces)
+#: The pre-check's helpers compiled in place by numba (cached on disk), then
+#: ``_apart(corners, F)``: :func:`_apart_faces` compiled.
+_sign = _nb.njit(cache=True, inline="always")(_sign)
+_side = _nb.njit(cache=True, inline="always")(_side)
+_planes = _nb.njit(cache=True)(_planes)
+_orient2d = _nb.njit(cache=True, inline="always")(_orient2d)
+_plane_side = _nb.njit(cache=True, inline="always")(_plane_side)
+_wedges_apart = _nb.njit(cache=True)(_wedges_apart)
+_pair_apart = _nb.njit(cache=True, inline="always")(_pair_apart)
+_apart = _nb.njit(cache=True)(_apart_faces)
 
 
 def point_polyline_distance(P: np.ndarray, C: np.ndarray, closed: bool) -> np.ndarray:
@@ -1012,8 +1007,7 @@ def seam_gap(seam_points: np.ndarray, host_points: np.ndarray, closed: bool) -> 
         (divided by the mean host seam edge).
     """
     d = point_polyline_distance(seam_points, host_points, closed)
-    seg = np.roll(host_points, -1, axis=0) - host_points if closed else np.diff(host_points, axis=0)
-    mean_edge = float(np.linalg.norm(seg, axis=1).mean())
+    mean_edge = mean_segment(host_points, closed)
     return {
         "max": float(d.max()),
         "mean": float(d.mean()),

@@ -61,8 +61,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from . import __version__
 from .atomic import atomic_write_text
 from .boundary import Curve, select_curve
@@ -80,6 +78,7 @@ from .outputs import (
     read_manifest,
     remove_stale_staging,
 )
+from .polyline import mean_segment
 from .spec import CaseSpec, discover_cases, load_case
 
 __all__ = [
@@ -191,9 +190,7 @@ def _json_text(data: Any) -> str:
 
 def _mean_curve_edge(mesh, curve: Curve) -> float:
     sel = select_curve(mesh, curve, name="host_curve")
-    P = mesh.V[sel.indices]
-    seg = np.roll(P, -1, axis=0) - P if sel.closed else np.diff(P, axis=0)
-    return float(np.linalg.norm(seg, axis=1).mean())
+    return mean_segment(mesh.V[sel.indices], sel.closed)
 
 
 def _has_curve(c: Curve) -> bool:

@@ -6,7 +6,6 @@ import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -17,30 +16,11 @@ from .io import DEFAULT_OUTPUT_FORMATS, output_formats, write_mesh
 from .mesh import Mesh
 from .metrics import SELF_INTERSECTION_RINGS, ring_band, self_intersections
 from .options import JoinOptions
+from .plain import plain_json
 from .quality import QualityWarning, assess
 from .weld import Welded, weld
 
 __all__ = ["JoinResult", "JoinedSeam", "plain_json"]
-
-
-def plain_json(value: Any) -> Any:
-    """``value`` with numpy scalars and arrays turned into plain Python (for ``json.dumps``).
-
-    Non-finite floats become ``None`` (JSON has no NaN).
-    """
-    if isinstance(value, dict):
-        return {str(k): plain_json(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [plain_json(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return plain_json(value.tolist())
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if np.isfinite(value) else None
-    return value
 
 
 def _with_quality(mesh: Mesh) -> Mesh:

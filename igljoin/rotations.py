@@ -22,7 +22,7 @@ from __future__ import annotations
 import igl
 import numpy as np
 
-__all__ = ["fit_rotations", "fit_rotations_igl", "procrustes_from_igl_stack"]
+__all__ = ["fit_rotations", "fit_rotations_igl"]
 
 #: Newton stops once every rotation increment is below this (radians); the
 #: next increment would be below its square, i.e. at rounding level.
@@ -55,12 +55,6 @@ def fit_rotations_igl(A: np.ndarray) -> np.ndarray:
     S = np.ascontiguousarray(A.transpose(1, 2, 0).reshape(3 * n, 3))
     R = np.asarray(igl.fit_rotations(S, False))
     return np.ascontiguousarray(R.reshape(3, n, 3).transpose(0, 2, 1))
-
-
-def procrustes_from_igl_stack(S: np.ndarray) -> np.ndarray:
-    """Convert libigl's ``fit_rotations`` input stack (3n, 3) to covariances (3, 3, n)."""
-    n = S.shape[0] // 3
-    return np.ascontiguousarray(S.reshape(3, n, 3).transpose(2, 0, 1))
 
 
 def _matmul(P: np.ndarray, Q: np.ndarray) -> np.ndarray:

@@ -175,16 +175,6 @@ class LocalGlobalSolver:
             )
         return state, e, rhs
 
-    def global_step(self, targets: list[np.ndarray], bc: np.ndarray) -> np.ndarray:
-        """Minimiser of the fixed-target energy with ``X[fixed] = bc`` (shape (b, 3)).
-
-        ``targets`` holds one array of shape (rows, 3) per term. Returns shape (n, 3).
-        """
-        B = np.zeros((self.n, 3))
-        for term, t in zip(self.terms, targets):
-            B += term.K.T @ (term.weights[:, None] * t)
-        return self.plain_factor().solve(B, bc)
-
     def energy(self, X: np.ndarray) -> float:
         """``E(X)`` for positions of shape (n, 3)."""
         return self.local(X)[1]

@@ -15,8 +15,6 @@ otherwise exempt it from the bars.
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 
@@ -240,6 +238,12 @@ def test_creased_cut_is_creased_by_the_measure_and_reported(runs, name):
     _band(run)
     assert run.crease_uncut.max() > CREASED_DEG
     for res in (run.untouched, run.moved):
-        # the result says the host was creased there: its input crease and a warning
-        assert res.metrics["input_crease_deg"]["max"] > CREASED_DEG
-        assert "host_creased" in json.dumps(res.report())
+        # the result says the host was creased there: its report gives the inputs' crease,
+        # and a crease the band fits tell from their noise is the inputs' (host_creased),
+        # never one the join made (crease)
+        report = res.report()
+        assert report["metrics"]["input_crease_deg"]["max"] > CREASED_DEG
+        codes = [w["code"] for w in report["warnings"]]
+        assert "crease" not in codes
+        if res.metrics["crease_deg"]["beyond_noise_max"] > CREASED_DEG:
+            assert "host_creased" in codes

@@ -460,7 +460,7 @@ def _check_self_intersections(V, F, faces=None):
     ref = _cgal_pairs(V, F, faces)
     _assert_same(metrics.self_intersections(V, F, faces), ref)
     sel = np.arange(len(F)) if faces is None else np.flatnonzero(faces)
-    if metrics._apart is not None and sel.size >= 2:
+    if sel.size >= 2:
         sub = np.ascontiguousarray(F[sel])
         apart = metrics._apart(np.ascontiguousarray(np.take(V, sub, axis=0)), sub)
         reported = np.isin(sel, ref.reshape(-1))
@@ -613,17 +613,3 @@ def test_self_intersections_of_welded_joins(joins):
     pw = pushed.merged
     band = metrics.ring_band(pw.mesh.F, pw.seam, metrics.SELF_INTERSECTION_RINGS)
     assert len(_check_self_intersections(pw.mesh.V, pw.mesh.F, band))
-
-
-def test_self_intersections_without_numba_are_the_same(monkeypatch, joins):
-    rng = np.random.default_rng(10)
-    V, F = _random_soup(rng, 80, 50, 1.0)
-    s, res = joins["end_to_end", "equal"]
-    w = res.merged
-    band = metrics.ring_band(w.mesh.F, w.seam, 3)
-    fast = [metrics.self_intersections(V, F), metrics.self_intersections(w.mesh.V, w.mesh.F, band)]
-    monkeypatch.setattr(metrics, "_apart", None)
-    slow = [metrics.self_intersections(V, F), metrics.self_intersections(w.mesh.V, w.mesh.F, band)]
-    for a, b in zip(fast, slow):
-        _assert_same(a, b)
-    assert len(fast[0])

@@ -232,6 +232,8 @@ _CHANGED = {
     "smooth_weight": 3.0,
     "smooth_mode": "paper",
     "smooth_band": 3.0,
+    "join_angle": 20.0,
+    "join_side": "normal",
     "smooth_radius": 2.0,
     "smooth_tolerance": 5.0,
     "laplacian": "cotangent",
@@ -288,3 +290,20 @@ def test_make_does_not_validate_an_instance_again():
     opt = JoinOptions(tolerance=1e-3)
     assert JoinOptions.make(opt) is opt  # frozen and validated when built
     assert JoinOptions.make(opt, tolerance=1e-4) is not opt
+
+
+@pytest.mark.parametrize("bad", [-1.0, 90.0, float("nan"), "45", True, [30.0, "a"], []])
+def test_join_angle_out_of_range_is_refused_with_its_range(bad):
+    with pytest.raises(OptionsError, match="join_angle"):
+        JoinOptions(join_angle=bad)
+
+
+def test_join_angle_per_seam_must_match_the_seams():
+    from igljoin import JoinSolver, phantoms
+
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.4)
+    assert JoinOptions(join_angle=[10, None]).join_angle == (10.0, None)
+    with pytest.raises(OptionsError, match="one per seam"):
+        JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve, join_angle=[10.0, 20.0])
+    with pytest.raises(OptionsError, match="join_side"):
+        JoinOptions(join_side="up")

@@ -168,9 +168,12 @@ def triggered(clean, oversized, unsmoothed, cut_short, off_seam, sliver, uneven)
     return {
         "not_converged": cut_short,
         "crease": unsmoothed,
-        # the lead's band measure of the inputs' crease: a host with a 25-degree ridge there
+        # a result that kept a 20-degree crease the inputs already met at (a ridge of the
+        # host along the seam; the corpus's wing tip is the real case, tests/test_corpus.py)
         "host_creased": _with_metrics(
-            base, input_crease_deg={"mean": 12.0, "max": 25.0, "min": 1.0}
+            base,
+            crease_deg={"mean": 8.0, "max": 20.0, "min": 1.0, "beyond_noise_max": 16.0},
+            input_crease_deg={"mean": 12.0, "max": 25.0, "min": 1.0, "beyond_noise_max": 21.0},
         ),
         "folds": oversized,
         "weld_failed": off_seam,
@@ -186,12 +189,11 @@ def triggered(clean, oversized, unsmoothed, cut_short, off_seam, sliver, uneven)
 
 def test_the_paper_samples_join_without_a_warning(clean, rejoined):
     assert len(clean) == 6
-    # host_creased only where the inputs' crease is measured (input_crease_deg) and above
-    # its threshold: the samples' guests arrive at an angle by design
+    # the samples' guests arrive at an angle (their inputs meet at 11-19 degrees), which
+    # the join removes: no warning, the report's input_crease_deg says it
     for name, res in clean.items():
-        meets = res.metrics.get("input_crease_deg", {}).get("max") or 0.0
-        expected = ["host_creased"] if meets > quality.HOST_CREASE_DEG else []
-        assert _codes(res) == expected, name
+        assert res.metrics["input_crease_deg"]["max"] > quality.HOST_CREASE_DEG, name
+        assert _codes(res) == [], name
     assert _codes(rejoined) == []
 
 
@@ -214,9 +216,7 @@ def test_each_code_fires_on_its_fault_and_crosses_its_threshold(triggered, code)
 def test_each_code_is_absent_on_the_clean_joins(clean, rejoined, code):
     # with the metric that triggers it present and harmless where a join lacks it
     calm = _with_metrics(rejoined, input_crease_deg={"mean": 0.5, "max": 3.0, "min": 0.0})
-    results = [rejoined, calm]
-    if code != "host_creased":  # the samples' inputs meet at a crease (see above)
-        results += clean.values()
+    results = [rejoined, calm, *clean.values()]
     assert [r for r in results if code in _codes(r)] == []
 
 
@@ -239,10 +239,9 @@ def test_the_figures_behind_the_faults(oversized, unsmoothed, cut_short, off_sea
     )
     w = {x.code: x for x in off_seam.warnings}["weld_failed"]
     assert off_seam.metrics["weld"]["error"] in w.message  # the weld's own advice is kept
-    # the split joins themselves are sound: only the seam warning is raised (and
-    # host_creased where the patch's crease with the wall is measured, as for the sample)
-    assert [c for c in _codes(sliver) if c != "host_creased"] == ["seam_slivers"]
-    assert [c for c in _codes(uneven) if c != "host_creased"] == ["seam_uneven"]
+    # the split joins themselves are sound: only the seam warning is raised
+    assert _codes(sliver) == ["seam_slivers"]
+    assert _codes(uneven) == ["seam_uneven"]
     w = {x.code: x for x in sliver.warnings}["seam_slivers"]
     # 0.03 of one segment over a median of one whole segment: 3 % (the inserted host points
     # are not the input's and are left out, else they would make slivers of their own)

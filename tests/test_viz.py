@@ -187,9 +187,14 @@ def test_framing_keeps_the_deformed_guest_in_the_picture(scenario, length, view)
     assert span.max() >= 0.4
     seam_xy, _ = viz.project(res.host.V[res.host_curve], cam.view_matrix(), cam.fov_deg, w, h)
     if scenario == "partial_patch":
-        # a patch fills its hole: its centre projects inside the seam's outline
+        # a patch fills its hole: its centre projects inside the seam's outline, grown by 1 %
+        # of the picture (8 px): seen along the wall the outline is a thin arc, and the
+        # bulging longer patch's median lies 1.3 px beside it (measured); a camera that lost
+        # the patch is off by hundreds of pixels
         centre = np.median(xy, axis=0)
-        assert (seam_xy.min(axis=0) <= centre).all() and (centre <= seam_xy.max(axis=0)).all()
+        margin = 0.01 * w
+        assert (seam_xy.min(axis=0) - margin <= centre).all()
+        assert (centre <= seam_xy.max(axis=0) + margin).all()
     else:
         # a tube end or a strip leaves the seam on one side: "up" points to the guest
         assert np.median(xy[:, 1]) < np.median(seam_xy[:, 1])
