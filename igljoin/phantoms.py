@@ -29,6 +29,12 @@ three samples whose guest boundary is *shorter* than (ratio 0.8), *equal* to
     A strip of cylinder wall (host) and a flat rectangular strip (guest) to
     be joined along one long side: an *open* seam whose ends are not closed.
 
+Beyond the paper, :func:`bypass_graft_sample` is an end-to-side coronary
+bypass: a graft bevelled at both ends (:func:`cut_tube`; one bevelled end
+alone is :func:`bevelled_graft`) to be sewn over elliptic openings in the
+aortic wall and in a coronary artery, two seams in one solve; and
+:func:`stiff_patch_sample` is the partial patch with a stiffer half.
+
 Conventions shared by every mesh built here: consistently oriented triangles
 whose right-hand-rule normals point outward (away from the vessel axis, or
 along the wall's outward normal for the flat patch after placement),
@@ -1005,52 +1011,6 @@ def paper_samples(**kw) -> list[Sample]:
 
 
 # -- several seams and stiffness maps ------------------------------------------------------
-
-
-def curved_tube(
-    centerline: np.ndarray,
-    radius: float,
-    n_around: int,
-    *,
-    name: str = "graft",
-) -> Mesh:
-    """A tube of constant radius swept along a planar centre line.
-
-    Parameters
-    ----------
-    centerline : ndarray, shape (k, 3)
-        Ring centres, ``k >= 2``, in a plane containing the y axis direction
-        as its normal (the x–z plane): rings lie in planes perpendicular to
-        the curve and the binormal is +y.
-    radius : float
-    n_around : int
-        Vertices per ring.
-    name : str
-
-    Returns
-    -------
-    Mesh
-        Vertex ``k * n_around + j`` is on ring ``k``; rings 0 and ``k − 1``
-        are the two open ends; normals point away from the centre line.
-    """
-    C = np.asarray(centerline, dtype=np.float64)
-    radius = _positive(radius, "curved_tube: radius")
-    n_around = _int_at_least(n_around, 3, "curved_tube: n_around")
-    T = np.gradient(C, axis=0)
-    T /= np.linalg.norm(T, axis=1, keepdims=True)
-    B = np.array([0.0, 1.0, 0.0])
-    N = np.cross(B, T)
-    N /= np.linalg.norm(N, axis=1, keepdims=True)
-    theta = 2.0 * np.pi * np.arange(n_around) / n_around
-    ring = np.cos(theta)[None, :, None] * N[:, None, :] + np.sin(theta)[None, :, None] * B
-    V = (C[:, None, :] + radius * ring).reshape(-1, 3)
-    F = _grid_faces(len(C), n_around, periodic=True)
-    # outward: the face normal must point away from its ring's centre
-    c = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    centre = C[F[:, 0] // n_around]
-    if np.einsum("ij,ij->i", c, V[F].mean(axis=1) - centre).mean() < 0:
-        F = F[:, ::-1].copy()
-    return Mesh(V, F, name=name)
 
 
 def _bezier(P: np.ndarray, n: int) -> np.ndarray:

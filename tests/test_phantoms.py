@@ -529,3 +529,25 @@ def test_bevelled_graft_bad_options():
         bevelled_graft(2.0, 1.0, 30.0)
     with pytest.raises(OptionsError, match=r"bevel_deg must be in \(0, 90\]"):
         bevelled_graft(bevel_deg=120.0)
+
+
+def test_cut_tube_refuses_planes_that_miss_or_cross():
+    from igljoin.phantoms import cut_tube
+
+    z = np.linspace(0.0, 10.0, 20)
+    C = np.column_stack([np.zeros_like(z), np.zeros_like(z), z])
+    ez = np.array([0.0, 0.0, 1.0])
+    square = ((np.zeros(3), ez), (10.0 * ez, ez))
+    tube = cut_tube(C, 1.0, 12, 5, square, binormal=(1.0, 0.0, 0.0))
+    assert_valid(tube, 2)
+    # square cuts of a straight tube: its rings at z = 0 and z = 10 exactly (rounding only)
+    assert np.abs(tube.V[:12, 2]).max() < 1e-12 and np.allclose(tube.V[-12:, 2], 10.0)
+    # a plane along the axis never crosses the generators near the end
+    with pytest.raises(OptionsError, match="misses the graft"):
+        cut_tube(C, 1.0, 12, 5, ((np.zeros(3), [1.0, 0.0, 0.0]), square[1]), binormal=(1, 0, 0))
+    with pytest.raises(OptionsError, match="cross inside the tube"):
+        cut_tube(C, 1.0, 12, 5, ((10.0 * ez, ez), (np.zeros(3), ez)), binormal=(1, 0, 0))
+    with pytest.raises(OptionsError, match="must lie in a plane"):
+        cut_tube(C, 1.0, 12, 5, square, binormal=(0.0, 0.0, 1.0))
+    with pytest.raises(OptionsError, match="centerline must have shape"):
+        cut_tube(C[:1], 1.0, 12, 5, square)
