@@ -613,8 +613,12 @@ def _close_seam(P: np.ndarray, F: np.ndarray, half_u: float) -> tuple[np.ndarray
     right = np.flatnonzero(np.abs(P[:, 0] - half_u) <= tol)
     left = np.flatnonzero(np.abs(P[:, 0] + half_u) <= tol)
     order = np.argsort(P[left, 1])
-    pos = np.searchsorted(P[left[order], 1], P[right, 1])
-    twin = left[order][np.clip(pos, 0, len(left) - 1)]
+    v_left = P[left[order], 1]
+    # the nearest left-side sample: ``linspace`` rounds the two sides' ``v`` differently in
+    # the last bit, so the insertion point may be one past the twin
+    pos = np.clip(np.searchsorted(v_left, P[right, 1]), 1, len(left) - 1)
+    below = np.abs(v_left[pos - 1] - P[right, 1]) <= np.abs(v_left[pos] - P[right, 1])
+    twin = left[order][np.where(below, pos - 1, pos)]
     if not np.allclose(P[twin, 1], P[right, 1], atol=tol):
         raise MeshError("aortic_wall: the two sides of a full-turn wall do not match")
     remap = np.arange(len(P))

@@ -551,3 +551,14 @@ def test_cut_tube_refuses_planes_that_miss_or_cross():
         cut_tube(C, 1.0, 12, 5, square, binormal=(0.0, 0.0, 1.0))
     with pytest.raises(OptionsError, match="centerline must have shape"):
         cut_tube(C[:1], 1.0, 12, 5, square)
+
+
+@pytest.mark.parametrize("resolution", [0.5, 0.8, 1.0])
+def test_bypass_sample_builds_at_any_resolution(resolution):
+    """The full-turn coronary wall closes whatever rounding its two glued sides carry."""
+    from igljoin.phantoms import bypass_graft_sample
+
+    g = bypass_graft_sample(resolution=resolution)
+    assert_valid(g.hosts[0], 2)  # aortic wall piece: outer rectangle and opening
+    assert_valid(g.hosts[1], 3)  # coronary artery: both ends and the opening
+    assert_valid(g.guest, 2)
