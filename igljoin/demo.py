@@ -364,8 +364,11 @@ def _bypass_picture(cases: list, target: Path) -> Path:
     from .atomic import atomic_path
     from .viz.figures import end_to_side_figure
 
-    image = end_to_side_figure(cases, "Bypass graft sewn end-to-side to the aorta (seam 0) "
-                               "and a coronary artery (seam 1), one solve per row")
+    image = end_to_side_figure(
+        cases,
+        "Bypass graft sewn end-to-side to the aorta (seam 0) "
+        "and a coronary artery (seam 1), one solve per row",
+    )
     with atomic_path(target) as tmp:
         image.save(tmp, format="PNG")
     return target
@@ -388,7 +391,7 @@ def _join_summary(res: JoinResult, seconds: float) -> dict:
 
 
 def run_extras(out: Path) -> dict:
-    """Beyond the paper: a bypass graft sewn end-to-side at both ends, and a patch with a stiff half.
+    """Beyond the paper: a bypass graft sewn end-to-side at both ends; a patch with a stiff half.
 
     Both are solved at the phantoms' full size, saved under ``out/bypass_graft``
     (one folder per join angle of :data:`BYPASS_JOIN_ANGLES`, and ``no_hood``:

@@ -1132,7 +1132,11 @@ def cut_tube(
         q = np.asarray(q, dtype=np.float64)
         c = np.stack([np.interp(q, s, C[:, d]) for d in range(3)], axis=-1)
         n = np.stack([np.interp(q, s, N[:, d]) for d in range(3)], axis=-1)
-        c = c + np.minimum(q, 0.0)[..., None] * T[0] + np.maximum(q - length, 0.0)[..., None] * T[-1]
+        c = (
+            c
+            + np.minimum(q, 0.0)[..., None] * T[0]
+            + np.maximum(q - length, 0.0)[..., None] * T[-1]
+        )
         return c, n / np.linalg.norm(n, axis=-1, keepdims=True)
 
     def generators(q):
@@ -1291,12 +1295,20 @@ def bypass_graft_sample(
     aorta = aortic_wall(15.0, 30.0, 80.0, axes, n_hole, target_edge=1.2 / res, name="aorta")
     aorta = Mesh(aorta.V + [0.0, 0.0, 8.0], aorta.F, name="aorta")
     coronary = aortic_wall(
-        _CORONARY_RADIUS, 30.0, 360.0, axes, n_hole, target_edge=0.6 / res, full_turn=True,
+        _CORONARY_RADIUS,
+        30.0,
+        360.0,
+        axes,
+        n_hole,
+        target_edge=0.6 / res,
+        full_turn=True,
         name="coronary artery",
     )
     # the opening faces -x (towards the aorta): turn the artery half a turn about z
     coronary = Mesh(
-        coronary.V @ _rotation("z", 180.0).T + [30.0, 0.0, -10.0], coronary.F, name="coronary artery"
+        coronary.V @ _rotation("z", 180.0).T + [30.0, 0.0, -10.0],
+        coronary.F,
+        name="coronary artery",
     )
     a_centre, a_normal = np.array([15.0, 0.0, 8.0]), np.array([1.0, 0.0, 0.0])
     c_centre = np.array([30.0 - _CORONARY_RADIUS, 0.0, -10.0])

@@ -244,7 +244,7 @@ def test_render_meshes_names_the_colour_shape():
 
 
 def test_demo_goes_beyond_the_paper(run):
-    """The end-to-side bypass graft (two seams, one solve) and the stiff-half patch are in the demo."""
+    """The end-to-side bypass (two seams, one solve) and the stiff-half patch are in the demo."""
     out, result = run
     report = json.loads((out / "report.json").read_text())
     extra = report["beyond_the_paper"]

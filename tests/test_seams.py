@@ -44,7 +44,9 @@ ANGLES = (30.0, 45.0)
 @pytest.fixture(scope="module", params=ANGLES, ids=lambda a: f"angle{a:g}")
 def bypass(graft, request):
     """The graft joined end-to-side to the aorta and the coronary artery in one solve."""
-    solver = igljoin.JoinSolver(graft.hosts, graft.guest, seams=graft.seams, join_angle=request.param)
+    solver = igljoin.JoinSolver(
+        graft.hosts, graft.guest, seams=graft.seams, join_angle=request.param
+    )
     return solver, solver.solve()
 
 

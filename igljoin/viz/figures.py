@@ -492,14 +492,13 @@ END_TO_SIDE_CLOSEUP = 1.6
 END_TO_SIDE_FOV_DEG = 30.0
 
 
-def _profile_camera(target: np.ndarray, half_width: float, aspect: float, side: np.ndarray,
-                    up: np.ndarray) -> Camera:
+def _profile_camera(
+    target: np.ndarray, half_width: float, aspect: float, side: np.ndarray, up: np.ndarray
+) -> Camera:
     """Looking at ``target`` along ``-side``, framing ``half_width`` across the panel."""
     half = half_width / max(min(aspect, 1.0), 1e-9)
     dist = half / np.tan(np.radians(END_TO_SIDE_FOV_DEG) / 2.0)
-    return Camera(
-        position=target + dist * side, target=target, up=up, fov_deg=END_TO_SIDE_FOV_DEG
-    )
+    return Camera(position=target + dist * side, target=target, up=up, fov_deg=END_TO_SIDE_FOV_DEG)
 
 
 def end_to_side_figure(cases: Sequence[tuple[str, Any]], title: str = "") -> Any:
@@ -577,8 +576,13 @@ def end_to_side_figure(cases: Sequence[tuple[str, Any]], title: str = "") -> Any
         font=small,
     )
     for col, header in enumerate(END_TO_SIDE_COLUMNS):
-        draw.text((col * pw + pw // 2, title_h + header_h // 2), header, fill=_TEXT, font=font,
-                  anchor="mm")
+        draw.text(
+            (col * pw + pw // 2, title_h + header_h // 2),
+            header,
+            fill=_TEXT,
+            font=font,
+            anchor="mm",
+        )
     for row, (caption, res) in enumerate(cases):
         y = title_h + header_h + row * (caption_h + ph) + caption_h // 2
         si = res.metrics.get("self_intersections", {}).get("pairs")
