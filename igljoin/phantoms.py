@@ -29,6 +29,12 @@ three samples whose guest boundary is *shorter* than (ratio 0.8), *equal* to
     A strip of cylinder wall (host) and a flat rectangular strip (guest) to
     be joined along one long side: an *open* seam whose ends are not closed.
 
+Beyond the paper, :func:`bypass_graft_sample` is an end-to-side coronary
+bypass: a graft bevelled at both ends (:func:`cut_tube`; one bevelled end
+alone is :func:`bevelled_graft`) to be sewn over elliptic openings in the
+aortic wall and in a coronary artery, two seams in one solve; and
+:func:`stiff_patch_sample` is the partial patch with a stiffer half.
+
 Conventions shared by every mesh built here: consistently oriented triangles
 whose right-hand-rule normals point outward (away from the vessel axis, or
 along the wall's outward normal for the flat patch after placement),
@@ -77,6 +83,9 @@ __all__ = [
     "Sample",
     "aortic_wall",
     "artery_tube",
+    "bevelled_graft",
+    "bypass_graft_sample",
+    "cut_tube",
     "ellipse_perimeter",
     "ellipse_scale_for_perimeter",
     "flat_patch",
@@ -103,6 +112,10 @@ _PATCH_N = 203
 _PATCH_TOTAL_VERTICES = 1300
 _STRIP_HOST_GRID = (40, 20)  # (along z, around)
 _STRIP_GUEST_GRID = (30, 16)  # (along z, across)
+_BYPASS_N_HOLE = 56  # points on each opening of the bypass sample
+_BYPASS_N_AROUND = 40  # graft vertices per ring
+_BYPASS_N_ALONG = 60  # graft rings
+_CORONARY_RADIUS = 2.0
 
 
 # ----------------------------------------------------------------------------
@@ -600,8 +613,12 @@ def _close_seam(P: np.ndarray, F: np.ndarray, half_u: float) -> tuple[np.ndarray
     right = np.flatnonzero(np.abs(P[:, 0] - half_u) <= tol)
     left = np.flatnonzero(np.abs(P[:, 0] + half_u) <= tol)
     order = np.argsort(P[left, 1])
-    pos = np.searchsorted(P[left[order], 1], P[right, 1])
-    twin = left[order][np.clip(pos, 0, len(left) - 1)]
+    v_left = P[left[order], 1]
+    # the nearest left-side sample: ``linspace`` rounds the two sides' ``v`` differently in
+    # the last bit, so the insertion point may be one past the twin
+    pos = np.clip(np.searchsorted(v_left, P[right, 1]), 1, len(left) - 1)
+    below = np.abs(v_left[pos - 1] - P[right, 1]) <= np.abs(v_left[pos] - P[right, 1])
+    twin = left[order][np.where(below, pos - 1, pos)]
     if not np.allclose(P[twin, 1], P[right, 1], atol=tol):
         raise MeshError("aortic_wall: the two sides of a full-turn wall do not match")
     remap = np.arange(len(P))
@@ -1000,52 +1017,6 @@ def paper_samples(**kw) -> list[Sample]:
 # -- several seams and stiffness maps ------------------------------------------------------
 
 
-def curved_tube(
-    centerline: np.ndarray,
-    radius: float,
-    n_around: int,
-    *,
-    name: str = "graft",
-) -> Mesh:
-    """A tube of constant radius swept along a planar centre line.
-
-    Parameters
-    ----------
-    centerline : ndarray, shape (k, 3)
-        Ring centres, ``k >= 2``, in a plane containing the y axis direction
-        as its normal (the x–z plane): rings lie in planes perpendicular to
-        the curve and the binormal is +y.
-    radius : float
-    n_around : int
-        Vertices per ring.
-    name : str
-
-    Returns
-    -------
-    Mesh
-        Vertex ``k * n_around + j`` is on ring ``k``; rings 0 and ``k − 1``
-        are the two open ends; normals point away from the centre line.
-    """
-    C = np.asarray(centerline, dtype=np.float64)
-    radius = _positive(radius, "curved_tube: radius")
-    n_around = _int_at_least(n_around, 3, "curved_tube: n_around")
-    T = np.gradient(C, axis=0)
-    T /= np.linalg.norm(T, axis=1, keepdims=True)
-    B = np.array([0.0, 1.0, 0.0])
-    N = np.cross(B, T)
-    N /= np.linalg.norm(N, axis=1, keepdims=True)
-    theta = 2.0 * np.pi * np.arange(n_around) / n_around
-    ring = np.cos(theta)[None, :, None] * N[:, None, :] + np.sin(theta)[None, :, None] * B
-    V = (C[:, None, :] + radius * ring).reshape(-1, 3)
-    F = _grid_faces(len(C), n_around, periodic=True)
-    # outward: the face normal must point away from its ring's centre
-    c = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    centre = C[F[:, 0] // n_around]
-    if np.einsum("ij,ij->i", c, V[F].mean(axis=1) - centre).mean() < 0:
-        F = F[:, ::-1].copy()
-    return Mesh(V, F, name=name)
-
-
 def _bezier(P: np.ndarray, n: int) -> np.ndarray:
     t = np.linspace(0.0, 1.0, n)[:, None]
     return (
@@ -1076,56 +1047,287 @@ class MultiSeamSample:
     description: str
 
 
-def bypass_graft_sample(*, resolution: float = 1.0) -> MultiSeamSample:
-    """A coronary bypass graft to be sewn to the aorta and to a coronary artery.
+def _plane_crossings(s_grid, G, point, normal, near):
+    """Per generator, the arc length where it crosses a plane, the crossing nearest ``near``.
 
-    The host is two meshes: a piece of aortic wall (radius 15 mm) with a
-    round hole of radius 3 mm, and a coronary artery (radius 2 mm) with an
-    elliptic side opening facing the aorta (end-to-side anastomosis). The
-    guest is a curved graft tube (radius 3 mm) swept along a cubic curve
-    from near the aortic hole to near the coronary opening, placed 1.5 mm
-    short of both so that both seams must be pulled into place.
+    ``G`` (len(s_grid), n, 3) are the generators sampled at ``s_grid``; linear between samples.
+    """
+    f = (G - point) @ normal  # (k, n)
+    change = np.sign(f[:-1]) != np.sign(f[1:])
+    s_mid = 0.5 * (s_grid[:-1] + s_grid[1:])
+    dist = np.where(change, np.abs(s_mid[:, None] - near), np.inf)
+    i = np.argmin(dist, axis=0)
+    if not np.isfinite(dist[i, np.arange(f.shape[1])]).all():
+        raise OptionsError(
+            "the cut plane misses the graft: it must cross every generator of the tube near its "
+            "end; lengthen the graft or make the bevel less oblique"
+        )
+    j = np.arange(f.shape[1])
+    f0, f1 = f[i, j], f[i + 1, j]
+    return s_grid[i] + (s_grid[i + 1] - s_grid[i]) * f0 / (f0 - f1)
+
+
+def cut_tube(
+    centerline: np.ndarray,
+    radius: float,
+    n_around: int,
+    n_along: int,
+    cuts: tuple,
+    *,
+    binormal=(0.0, 1.0, 0.0),
+    name: str = "graft",
+) -> Mesh:
+    """A tube swept along a planar centre line, each end cut by a plane (a bevelled end).
 
     Parameters
     ----------
-    resolution : float
+    centerline : ndarray, shape (k, 3)
+        Densely sampled centre line (``k >= 2``) in a plane whose normal is
+        ``binormal``. It is continued straight along its end tangents, so a
+        cut plane may lie beyond either end.
+    radius : float
+    n_around : int
+        Vertices per ring (>= 3).
+    n_along : int
+        Rings (>= 2).
+    cuts : ((point, normal), (point, normal))
+        The planes that cut the start and the end: each generator of the tube
+        (a line at fixed angle round the centre line) runs from where it
+        crosses the first plane to where it crosses the second, its ``n_along``
+        vertices equally spaced between. A plane oblique to the centre line
+        gives an elliptic, bevelled end.
+    binormal : array_like, shape (3,), keyword-only
+        Unit normal of the centre line's plane; angle 0 round the centre line
+        is ``binormal x tangent``.
+    name : str, keyword-only
+
+    Returns
+    -------
+    Mesh
+        Vertex ``i * n_around + j`` is on ring ``i``, generator ``j``; rings 0
+        and ``n_along - 1`` lie on the two cut planes; normals point away from
+        the centre line.
+    """
+    radius = _positive(radius, "cut_tube: radius")
+    n_around = _int_at_least(n_around, 3, "cut_tube: n_around")
+    n_along = _int_at_least(n_along, 2, "cut_tube: n_along")
+    C = np.asarray(centerline, dtype=np.float64)
+    if C.ndim != 2 or C.shape[1] != 3 or len(C) < 2:
+        raise OptionsError(f"cut_tube: centerline must have shape (k >= 2, 3), got {C.shape}")
+    B = np.asarray(binormal, dtype=np.float64)
+    B = B / np.linalg.norm(B)
+    seg = np.linalg.norm(np.diff(C, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    T = np.gradient(C, s, axis=0)
+    T /= np.linalg.norm(T, axis=1, keepdims=True)
+    if np.abs(T @ B).max() > 1e-6:
+        raise OptionsError("cut_tube: the centre line must lie in a plane normal to binormal")
+    N = np.cross(B, T)
+    theta = 2.0 * np.pi * np.arange(n_around) / n_around
+    length = float(s[-1])
+    reach = length + 4.0 * radius
+
+    def frame(q):
+        """Centre and angle-0 direction at arc lengths ``q``, continued straight beyond the ends."""
+        q = np.asarray(q, dtype=np.float64)
+        c = np.stack([np.interp(q, s, C[:, d]) for d in range(3)], axis=-1)
+        n = np.stack([np.interp(q, s, N[:, d]) for d in range(3)], axis=-1)
+        c = (
+            c
+            + np.minimum(q, 0.0)[..., None] * T[0]
+            + np.maximum(q - length, 0.0)[..., None] * T[-1]
+        )
+        return c, n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+    def generators(q):
+        c, n = frame(q)
+        ring = np.cos(theta)[..., :, None] * n[..., None, :] + np.sin(theta)[:, None] * B
+        return c[..., None, :] + radius * ring
+
+    grid = np.linspace(-reach, length + reach, 8 * (len(C) + 64))
+    G = generators(grid)
+    ends = []
+    for (point, normal), near in zip(cuts, (0.0, length)):
+        m = np.asarray(normal, dtype=np.float64)
+        ends.append(_plane_crossings(grid, G, np.asarray(point, dtype=np.float64), m, near))
+    s0, s1 = ends
+    if (s1 <= s0).any():
+        raise OptionsError("cut_tube: the two cut planes cross inside the tube; move them apart")
+    t = np.linspace(0.0, 1.0, n_along)[:, None]
+    Q = s0[None, :] + (s1 - s0)[None, :] * t  # (n_along, n_around)
+    c, n = frame(Q)
+    ring = np.cos(theta)[None, :, None] * n + np.sin(theta)[None, :, None] * B
+    V = (c + radius * ring).reshape(-1, 3)
+    F = _grid_faces(n_along, n_around, periodic=True)
+    normal = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    if np.einsum("ij,ij->i", normal, ring.reshape(-1, 3)[F[:, 0]]).mean() < 0:
+        F = F[:, ::-1].copy()
+    return Mesh(V, F, name=name)
+
+
+def bevelled_graft(
+    radius: float = 2.0,
+    length: float = 20.0,
+    bevel_deg: float = 45.0,
+    n_around: int = 40,
+    n_along: int = 40,
+    *,
+    name: str = "graft",
+) -> Mesh:
+    """A straight graft along +z whose end at the origin is cut obliquely (the hood).
+
+    Parameters
+    ----------
+    radius : float
+    length : float
+        Distance along the axis from the centre of the bevelled end to the
+        square far end ``z = length``.
+    bevel_deg : float
+        Angle between the cut plane and the axis, in (0, 90]; 90 is a square
+        cut. The cut plane contains the x axis; its normal is
+        ``(0, -cos b, sin b)``.
+    n_around, n_along : int
+    name : str, keyword-only
+
+    Returns
+    -------
+    Mesh
+        Ring 0 is the bevelled end, an ellipse of semi-axes ``radius`` (along
+        x) and ``radius / sin(bevel)``. Laid on a wall in the cut plane, the
+        graft leaves it at ``bevel`` at the **toe** (``y < 0``: the wall and the
+        graft meet at an obtuse angle, the graft leaving at ``bevel`` from the
+        wall continued across the opening) and at ``180° - bevel`` at the
+        **heel** (``y > 0``: an acute angle ``bevel`` between graft and wall).
+
+    Examples
+    --------
+    >>> g = bevelled_graft(2.0, 20.0, 30.0, 24, 12)
+    >>> round(float(np.linalg.norm(g.V[:24], axis=1).max()), 6)  # long semi-axis: r / sin 30°
+    4.0
+    """
+    length = _positive(length, "bevelled_graft: length")
+    b = _positive(bevel_deg, "bevelled_graft: bevel_deg")
+    if b > 90.0:
+        raise OptionsError(f"bevelled_graft: bevel_deg must be in (0, 90], got {bevel_deg}")
+    radius = _positive(radius, "bevelled_graft: radius")
+    if radius / math.tan(math.radians(b)) >= length:
+        raise OptionsError(
+            f"bevelled_graft: the bevel reaches past the far end (radius / tan(bevel) = "
+            f"{radius / math.tan(math.radians(b)):.3g} >= length {length}); lengthen the graft "
+            "or make the bevel less oblique"
+        )
+    z = np.linspace(0.0, length, 64)
+    C = np.column_stack([np.zeros_like(z), np.zeros_like(z), z])
+    m = np.array([0.0, -math.cos(math.radians(b)), math.sin(math.radians(b))])
+    cuts = ((np.zeros(3), m), (np.array([0.0, 0.0, length]), np.array([0.0, 0.0, 1.0])))
+    return cut_tube(C, radius, n_around, n_along, cuts, binormal=(1.0, 0.0, 0.0), name=name)
+
+
+def bypass_graft_sample(
+    *,
+    bevel_deg: float = 45.0,
+    hood: float = 1.5,
+    radius: float = 2.0,
+    gap: float = 1.0,
+    resolution: float = 1.0,
+) -> MultiSeamSample:
+    """A coronary bypass graft sewn end-to-side to the aorta and to a coronary artery.
+
+    The host is two meshes: a piece of aortic wall (radius 15 mm) and a
+    coronary artery (radius 2 mm), each with an elliptic opening (the
+    arteriotomy) elongated along its vessel. The guest is a graft tube
+    (:func:`cut_tube`) swept along a cubic curve from the aorta to the
+    coronary, both ends **bevelled**: each is cut by the tangent plane of
+    its wall, and the graft leaves each wall at ``bevel_deg`` towards
+    ``-z`` (down the aorta, downstream along the coronary artery), so its
+    toe points that way and its heel, the acute side, the other way.
+    Each opening is the graft's oblique section lengthened and widened by
+    ``hood``: the bevelled end spreads over it into a hood, as a surgeon
+    sews it. The graft lies ``gap`` short of both walls, so both seams are
+    pulled into place.
+
+    Parameters
+    ----------
+    bevel_deg : float, keyword-only
+        Angle between the graft and each wall (the bevel of both ends), in
+        (0, 90].
+    hood : float, keyword-only
+        Millimetres by which each opening's semi-axes exceed the graft's
+        oblique section (``radius`` across, ``radius / sin(bevel)`` along),
+        >= 0. With 0 the opening is the graft's own end: a hood cannot form,
+        and a join angle well below the bevel pinches the graft into itself.
+    radius : float, keyword-only
+        Graft radius (mm).
+    gap : float, keyword-only
+        Distance of the graft's ends from their walls (mm), >= 0.
+    resolution : float, keyword-only
         Point-count scale.
 
     Returns
     -------
     MultiSeamSample
+        ``seams[0]`` is the aorta, ``seams[1]`` the coronary artery.
+
+    Examples
+    --------
+    >>> import igljoin
+    >>> g = bypass_graft_sample()
+    >>> res = igljoin.join(g.hosts, g.guest, seams=g.seams, join_angle=45)
+    >>> [abs(float(sm.crease.mean()) - 45.0) < 2.0 for sm in res.seams]
+    [True, True]
+    >>> res.metrics["self_intersections"]["pairs"], res.metrics["folded_pairs"]
+    (0, 0)
     """
-    n_hole = _count(64, resolution, 12)
-    aorta = aortic_wall(
-        15.0, 30.0, 80.0, (3.0, 3.0), n_hole, target_edge=1.2 / resolution, name="aorta"
-    )
+    b = _positive(bevel_deg, "bypass_graft_sample: bevel_deg")
+    if b > 90.0:
+        raise OptionsError(f"bypass_graft_sample: bevel_deg must be in (0, 90], got {bevel_deg}")
+    r = _positive(radius, "bypass_graft_sample: radius")
+    hood = float(hood)
+    gap = float(gap)
+    if not (math.isfinite(hood) and hood >= 0.0) or not (math.isfinite(gap) and gap >= 0.0):
+        raise OptionsError(
+            f"bypass_graft_sample: hood and gap must be finite and >= 0, got hood={hood}, gap={gap}"
+        )
+    res = _positive(resolution, "bypass_graft_sample: resolution")
+    sb, cb = math.sin(math.radians(b)), math.cos(math.radians(b))
+    axes = (r / sb + hood, r + hood)  # (along the vessel, around it)
+    n_hole = _count(_BYPASS_N_HOLE, res, 12)
+    aorta = aortic_wall(15.0, 30.0, 80.0, axes, n_hole, target_edge=1.2 / res, name="aorta")
     aorta = Mesh(aorta.V + [0.0, 0.0, 8.0], aorta.F, name="aorta")
-    perimeter = float(ellipse_perimeter(3.0, 3.0))  # the graft's end circle
-    # an opening elongated along the artery, as long (round) as the graft's end
-    scale = ellipse_scale_for_perimeter(1.0, 0.55, perimeter)
     coronary = aortic_wall(
-        2.0,
+        _CORONARY_RADIUS,
         30.0,
         360.0,
-        (scale, 0.55 * scale),
+        axes,
         n_hole,
-        target_edge=0.6 / resolution,
+        target_edge=0.6 / res,
         full_turn=True,
         name="coronary artery",
     )
     # the opening faces -x (towards the aorta): turn the artery half a turn about z
-    R = _rotation("z", 180.0)
-    coronary = Mesh(coronary.V @ R.T + [30.0, 0.0, -10.0], coronary.F, name="coronary artery")
-    start = np.array([16.5, 0.0, 8.0])  # 1.5 mm outside the aortic hole
-    end = np.array([26.5, 0.0, -10.0])  # 1.5 mm short of the coronary opening
-    ctrl = np.array([start, start + [9.0, 0.0, 0.0], end - [9.0, 0.0, 0.0], end])
-    graft = curved_tube(
-        _bezier(ctrl, _count(40, resolution, 6)), 3.0, _count(56, resolution, 8), name="graft"
+    coronary = Mesh(
+        coronary.V @ _rotation("z", 180.0).T + [30.0, 0.0, -10.0],
+        coronary.F,
+        name="coronary artery",
     )
-    host_loops = [boundary_loops(aorta.F), boundary_loops(coronary.F)]
-    hole_aorta = next(lp for lp in host_loops[0] if 0 in lp)
-    hole_coronary = next(lp for lp in host_loops[1] if 0 in lp)
-    n_around = _count(56, resolution, 8)
+    a_centre, a_normal = np.array([15.0, 0.0, 8.0]), np.array([1.0, 0.0, 0.0])
+    c_centre = np.array([30.0 - _CORONARY_RADIUS, 0.0, -10.0])
+    c_normal = np.array([-1.0, 0.0, 0.0])
+    down = np.array([sb, 0.0, -cb])  # leaves the aorta and enters the coronary at the bevel
+    start, end = a_centre + gap * a_normal, c_centre + gap * c_normal
+    reach = np.linalg.norm(end - start) / 3.0
+    ctrl = np.array([start, start + reach * down, end - reach * down, end])
+    n_around = _count(_BYPASS_N_AROUND, res, 8)
+    graft = cut_tube(
+        _bezier(ctrl, 256),
+        r,
+        n_around,
+        _count(_BYPASS_N_ALONG, res, 6),
+        ((start, a_normal), (end, c_normal)),
+        name="graft",
+    )
+    hole_aorta = next(lp for lp in boundary_loops(aorta.F) if 0 in lp)
+    hole_coronary = next(lp for lp in boundary_loops(coronary.F) if 0 in lp)
     return MultiSeamSample(
         name="bypass_graft",
         hosts=[aorta, coronary],
@@ -1135,8 +1337,10 @@ def bypass_graft_sample(*, resolution: float = 1.0) -> MultiSeamSample:
             (1, hole_coronary, Curve(loop=_loop_through(graft.F, graft.n_vertices - n_around))),
         ],
         description=(
-            "Coronary bypass: a curved graft (radius 3 mm) sewn to a 3 mm hole in the aortic "
-            "wall and to an elliptic side opening of a 2 mm coronary artery, both in one solve."
+            f"Coronary bypass, end-to-side at both ends: a graft (radius {r:g} mm) bevelled at "
+            f"{b:g} degrees at both ends, sewn to elliptic openings {hood:g} mm larger than its "
+            "ends in the aortic wall (radius 15 mm) and in a coronary artery (radius "
+            f"{_CORONARY_RADIUS:g} mm), both in one solve."
         ),
     )
 

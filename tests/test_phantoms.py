@@ -448,3 +448,117 @@ def test_sample_irregular_and_deterministic(key):
 def test_bad_options_raise(call):
     with pytest.raises(OptionsError):
         call()
+
+
+# ----------------------------------------------------------------------------
+# bevelled grafts and the end-to-side bypass sample
+# ----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("bevel", [30.0, 45.0, 90.0])
+def test_bevelled_graft_end_lies_on_its_oblique_plane(bevel):
+    from igljoin.phantoms import bevelled_graft
+
+    r, n = 2.0, 32
+    g = bevelled_graft(r, 20.0, bevel, n, 12)
+    assert_valid(g, 2)
+    # normals point away from the axis (z): every face, as for artery_tube
+    assert radial_dots(g).min() > 0.9
+    b = math.radians(bevel)
+    m = np.array([0.0, -math.cos(b), math.sin(b)])
+    end = g.V[:n]
+    # ring 0 on the cut plane and on the cylinder: rounding only (1e-9 mm on a 2 mm graft)
+    assert np.abs(end @ m).max() < 1e-9
+    assert np.abs(np.linalg.norm(end[:, :2], axis=1) - r).max() < 1e-9
+    # the oblique section is an ellipse of semi-axes r and r / sin(bevel)
+    d = np.linalg.norm(end, axis=1)
+    assert d.max() == pytest.approx(r / math.sin(b), rel=1e-6)  # the long axis hits a vertex
+    assert d.min() == pytest.approx(r, rel=1e-6)
+    # toe (y < 0) and heel (y > 0): the generators leave the plane at the bevel
+    toe, heel = end[np.argmin(end[:, 1])], end[np.argmax(end[:, 1])]
+    assert toe[2] < 0.0 < heel[2]
+    assert math.degrees(math.asin(np.array([0.0, 0.0, 1.0]) @ m)) == pytest.approx(bevel)
+    assert np.allclose(g.V[-n:, 2], 20.0)  # the far end is square
+
+
+def test_bypass_sample_openings_are_a_hood_larger_than_the_graft_ends():
+    from igljoin.phantoms import bypass_graft_sample
+
+    g = bypass_graft_sample(bevel_deg=45.0, hood=1.5)
+    flat = bypass_graft_sample(bevel_deg=45.0, hood=0.0)
+    for hood, sample in ((1.5, g), (0.0, flat)):
+        for i, loop, curve in sample.seams:
+            host_len = polyline_length(sample.hosts[i].V[loop])
+            end = igl.boundary_loop_all(sample.guest.F)[curve.loop]
+            guest_len = polyline_length(sample.guest.V[end])
+            # the opening's semi-axes exceed the graft's oblique section (2 and 2/sin 45)
+            # by the hood: its perimeter by about 2 pi hood (the walls' curvature and the
+            # polylines' chords change it by a few per cent)
+            expected = ellipse_perimeter(2.0 / math.sin(math.radians(45.0)) + hood, 2.0 + hood)
+            assert host_len == pytest.approx(expected, rel=0.03), (hood, i)
+            assert guest_len == pytest.approx(
+                ellipse_perimeter(2.0 / math.sin(math.radians(45.0)), 2.0), rel=0.03
+            )
+    # both graft ends lie the gap (1 mm) off their walls' tangent planes, on the outer side
+    ends = [igl.boundary_loop_all(g.guest.F)[c.loop] for _, _, c in g.seams]
+    assert np.allclose(g.guest.V[ends[0], 0], 16.0)  # aortic wall tangent plane x = 15
+    assert np.allclose(g.guest.V[ends[1], 0], 27.0)  # coronary wall tangent plane x = 28
+    assert_valid(g.guest, 2)
+
+
+@pytest.mark.parametrize(
+    ("kw", "match"),
+    [
+        (dict(bevel_deg=95.0), "bevel_deg must be in"),
+        (dict(hood=-1.0), "hood and gap must be"),
+        (dict(gap=float("nan")), "hood and gap must be"),
+        (dict(radius=0.0), "radius must be a positive"),
+    ],
+)
+def test_bypass_sample_bad_options(kw, match):
+    from igljoin.phantoms import bypass_graft_sample
+
+    with pytest.raises(OptionsError, match=match):
+        bypass_graft_sample(**kw)
+
+
+def test_bevelled_graft_bad_options():
+    from igljoin.phantoms import bevelled_graft
+
+    with pytest.raises(OptionsError, match="bevel reaches past the far end"):
+        bevelled_graft(2.0, 1.0, 30.0)
+    with pytest.raises(OptionsError, match=r"bevel_deg must be in \(0, 90\]"):
+        bevelled_graft(bevel_deg=120.0)
+
+
+def test_cut_tube_refuses_planes_that_miss_or_cross():
+    from igljoin.phantoms import cut_tube
+
+    z = np.linspace(0.0, 10.0, 20)
+    C = np.column_stack([np.zeros_like(z), np.zeros_like(z), z])
+    ez = np.array([0.0, 0.0, 1.0])
+    square = ((np.zeros(3), ez), (10.0 * ez, ez))
+    tube = cut_tube(C, 1.0, 12, 5, square, binormal=(1.0, 0.0, 0.0))
+    assert_valid(tube, 2)
+    # square cuts of a straight tube: its rings at z = 0 and z = 10 exactly (rounding only)
+    assert np.abs(tube.V[:12, 2]).max() < 1e-12 and np.allclose(tube.V[-12:, 2], 10.0)
+    # a plane along the axis never crosses the generators near the end
+    with pytest.raises(OptionsError, match="misses the graft"):
+        cut_tube(C, 1.0, 12, 5, ((np.zeros(3), [1.0, 0.0, 0.0]), square[1]), binormal=(1, 0, 0))
+    with pytest.raises(OptionsError, match="cross inside the tube"):
+        cut_tube(C, 1.0, 12, 5, ((10.0 * ez, ez), (np.zeros(3), ez)), binormal=(1, 0, 0))
+    with pytest.raises(OptionsError, match="must lie in a plane"):
+        cut_tube(C, 1.0, 12, 5, square, binormal=(0.0, 0.0, 1.0))
+    with pytest.raises(OptionsError, match="centerline must have shape"):
+        cut_tube(C[:1], 1.0, 12, 5, square)
+
+
+@pytest.mark.parametrize("resolution", [0.5, 0.8, 1.0])
+def test_bypass_sample_builds_at_any_resolution(resolution):
+    """The full-turn coronary wall closes whatever rounding its two glued sides carry."""
+    from igljoin.phantoms import bypass_graft_sample
+
+    g = bypass_graft_sample(resolution=resolution)
+    assert_valid(g.hosts[0], 2)  # aortic wall piece: outer rectangle and opening
+    assert_valid(g.hosts[1], 3)  # coronary artery: both ends and the opening
+    assert_valid(g.guest, 2)

@@ -39,7 +39,15 @@ from .camera import Camera, frame_camera, project, seam_axes
 from .headless import render_meshes
 from .overlay import _DIM, _TEXT, colour_bar, fonts
 
-__all__ = ["FIGURES", "FigureLayout", "figure_layout", "paper_figure", "paper_figures", "scale"]
+__all__ = [
+    "FIGURES",
+    "FigureLayout",
+    "end_to_side_figure",
+    "figure_layout",
+    "paper_figure",
+    "paper_figures",
+    "scale",
+]
 
 #: Output key, scenario and title of each figure.
 FIGURES = {
@@ -472,3 +480,121 @@ def paper_figures(runs: Sequence[Any], out_dir: str | os.PathLike) -> dict[str, 
             image.save(tmp, format="PNG")
         written[key] = target
     return written
+
+
+#: Columns of the end-to-side figure: the whole graft, then each seam close up.
+END_TO_SIDE_COLUMNS = ("whole graft, seen across its plane", "seam 0 close up", "seam 1 close up")
+#: Panel size of the end-to-side figure (width, height), pixels.
+END_TO_SIDE_PANEL = (420, 340)
+#: Half the width a seam close-up frames, in the seam's own extent (its host curve's size).
+END_TO_SIDE_CLOSEUP = 1.6
+#: Field of view of the end-to-side panels (degrees): narrow, so the profiles are little distorted.
+END_TO_SIDE_FOV_DEG = 30.0
+
+
+def _profile_camera(
+    target: np.ndarray, half_width: float, aspect: float, side: np.ndarray, up: np.ndarray
+) -> Camera:
+    """Looking at ``target`` along ``-side``, framing ``half_width`` across the panel."""
+    half = half_width / max(min(aspect, 1.0), 1e-9)
+    dist = half / np.tan(np.radians(END_TO_SIDE_FOV_DEG) / 2.0)
+    return Camera(position=target + dist * side, target=target, up=up, fov_deg=END_TO_SIDE_FOV_DEG)
+
+
+def end_to_side_figure(cases: Sequence[tuple[str, Any]], title: str = "") -> Any:
+    """Draw end-to-side joins of a graft sewn at two seams, one row per join.
+
+    Every panel looks across the plane through both seams' centres that holds
+    the first seam's wall normal (a bypass graft's plane), so that each
+    seam is seen in profile: the angle at which the graft leaves each wall is
+    the angle drawn. Columns: the whole graft, then each seam close up
+    (:data:`END_TO_SIDE_CLOSEUP` times its host curve's extent). Guests are
+    coloured by area ratio on one scale for the figure.
+
+    Parameters
+    ----------
+    cases : sequence of (str, JoinResult)
+        A caption and a join with two seams (e.g. of
+        :func:`igljoin.phantoms.bypass_graft_sample`), one per row.
+    title : str
+
+    Returns
+    -------
+    PIL.Image.Image
+    """
+    if not cases or any(len(res.seams) != 2 for _, res in cases):
+        raise OptionsError("end_to_side_figure needs (caption, result) pairs of two-seam joins")
+    PIL = pillow()
+    ensure_init(headless=True)
+    pw, ph = END_TO_SIDE_PANEL
+    fs = 16
+    title_h, header_h, caption_h, bar_w = round(3.6 * fs), round(1.8 * fs), round(1.7 * fs), 150
+    rows = len(cases)
+    size = (3 * pw + bar_w, title_h + header_h + rows * (caption_h + ph))
+    limit = scale([res.area_ratio for _, res in cases])
+    data = np.concatenate([res.area_ratio for _, res in cases])
+    font, small = fonts(fs)
+    shots, background = [], None
+    for row, (_, res) in enumerate(cases):
+        X = res.guest.V
+        centre = X.mean(axis=0)
+        ends = [res.host.V[sm.host_curve] for sm in res.seams]
+        chord = ends[1].mean(axis=0) - ends[0].mean(axis=0)
+        chord /= np.linalg.norm(chord)
+        wall = np.linalg.svd(ends[0] - ends[0].mean(axis=0), full_matrices=False)[2][2]
+        side = np.cross(chord, wall)
+        side /= np.linalg.norm(side)
+        up = np.cross(side, chord)  # the chord between the seams runs left to right
+        box = _bounds(res.host, res.guest)
+        cams = [_profile_camera(centre, 0.6 * float(np.ptp(X @ chord)), pw / ph, side, up)]
+        for sm in res.seams:
+            P = res.host.V[sm.host_curve]
+            cams.append(
+                _profile_camera(
+                    P.mean(axis=0),
+                    END_TO_SIDE_CLOSEUP * 0.5 * float(np.linalg.norm(np.ptp(P, axis=0))),
+                    pw / ph,
+                    side,
+                    up,
+                )
+            )
+        face = colors.area_colors(res.area_ratio, limit)
+        for col, cam in enumerate(cams):
+            rgb, background = render_meshes(res.host, res.guest, face, cam, (pw, ph), bounds=box)
+            y = title_h + header_h + row * (caption_h + ph) + caption_h
+            shots.append(((col * pw, y), rgb))
+    img = PIL.Image.new("RGB", size, background)
+    for xy, rgb in shots:
+        img.paste(PIL.Image.fromarray(rgb), xy)
+    draw = PIL.ImageDraw.Draw(img)
+    draw.text((fs // 2, fs // 3), title, fill=_TEXT, font=font)
+    draw.text(
+        (fs // 2, fs // 3 + round(1.4 * fs)),
+        "Seen across the graft's plane, so each seam is in profile. Guest coloured by area "
+        "ratio (deformed / rest): blue shrink, white no change, red stretch. Host in grey-green.",
+        fill=_DIM,
+        font=small,
+    )
+    for col, header in enumerate(END_TO_SIDE_COLUMNS):
+        draw.text(
+            (col * pw + pw // 2, title_h + header_h // 2),
+            header,
+            fill=_TEXT,
+            font=font,
+            anchor="mm",
+        )
+    for row, (caption, res) in enumerate(cases):
+        y = title_h + header_h + row * (caption_h + ph) + caption_h // 2
+        si = res.metrics.get("self_intersections", {}).get("pairs")
+        angles = ", ".join(f"{sm.crease.mean():.1f}\u00b0" for sm in res.seams)
+        text = (
+            f"{caption}: mean angle at the seams {angles}; "
+            f"self-intersecting pairs {si}, folded pairs {res.metrics.get('folded_pairs')}"
+        )
+        draw.text((fs // 3, y), text, fill=_DIM, font=small, anchor="lm")
+    grid = tuple(min(255, c + 40) for c in background)
+    for col in (1, 2):
+        draw.line([(col * pw, title_h), (col * pw, size[1])], fill=grid)
+    bar = (3 * pw, title_h + header_h, bar_w, size[1] - title_h - header_h)
+    colour_bar(img, bar, fs, limit, (float(np.nanmin(data)), float(np.nanmax(data))))
+    return img
