@@ -40,8 +40,16 @@ def _page(table_md: str, figures: dict, seconds: float, resolution: float) -> st
         "bar that ends in a pointed cap marks area ratios beyond its scale, labelled with the "
         "true extreme.\n\n"
         + (pics + "\n" if pics else "")
+        + (_BYPASS_NOTE if any("bypass" in str(p) for p in figures.values()) else "")
         + body
     )
+
+
+_BYPASS_NOTE = (
+    "The bypass picture looks across the graft's plane, so each anastomosis is seen in "
+    "profile (see [Several seams and stiffness maps]"
+    "(seams.md#the-bypass-graft-end-to-side-at-both-ends)).\n\n"
+)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -64,6 +72,11 @@ def main(argv: list[str] | None = None) -> int:
                 ("figure_end_to_end", "End-to-end join, laid out like the paper's Fig. 2"),
                 ("figure_partial_patch", "Partial patching, laid out like the paper's Fig. 3"),
                 ("stiff_patch", "Beyond the paper: a patch with a 10x stiffer half"),
+                (
+                    "bypass_graft",
+                    "Beyond the paper: a bypass graft sewn end-to-side at both ends, at join "
+                    "angles 30° and 45° and on openings without a hood",
+                ),
             )
             if key in paths
         }
