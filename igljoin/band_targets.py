@@ -119,8 +119,9 @@ def kept_elevation(
     band : float
         Band width (mesh units).
     join_angle : float, optional
-        Degrees: the guest is to leave the host at this elevation instead (the
-        coherent part of ``φ`` is replaced by it, the rest kept).
+        Degrees: the elevation the guest is to leave the host at (0 or None:
+        the smooth join). What is removed is the significant part of the
+        coherent crease's deviation from it.
     join_side : {"guest", "normal", "opposite"}
         Sign of ``join_angle``: the side the rest guest lies on (the sign of its
         mean elevation; the normal's side if that is zero), the host normal's
@@ -162,13 +163,14 @@ def kept_elevation(
     # where a short seam holds few independent fits (about 2 standard errors for many)
     quantile = float(stdtrit(dof, SIGNIFICANCE_LEVEL))
     threshold = np.maximum(quantile * se, np.radians(SMALLEST_REMOVED_DEG))
-    shrunk = np.sign(coef) * np.maximum(np.abs(coef) - threshold, 0.0)
-    if join_angle is not None:
-        # the coherent part is replaced by the angle asked for, on the side asked for
+    # the join removes the significant part of the crease's deviation from the angle
+    # asked for (0: the smooth join); the rest stays as the rest guest has it
+    target = np.zeros_like(coef)
+    if join_angle:
         side = {"normal": 1.0, "opposite": -1.0}.get(join_side, np.sign(coef[0]) or 1.0)
-        kept = phi - B @ coef + side * np.radians(join_angle)
-        return kept, phi - kept
-    removed = B @ shrunk
+        target[0] = side * np.radians(join_angle)  # mode 0 is the constant along the seam
+    deviation = coef - target
+    removed = B @ (np.sign(deviation) * np.maximum(np.abs(deviation) - threshold, 0.0))
     return phi - removed, removed
 
 

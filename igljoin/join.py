@@ -986,11 +986,11 @@ class JoinSolver:
             inputs_all.append(inputs)
             onering_all.append(onering)
             angle = asked[i] if asked else None
-            if angle is not None:
-                # how far the guest leaves the host from the angle asked for
-                off_angle_all.append(
-                    crease.CreaseMeasure(np.abs(measured.angles - angle), band, measured.noise)
-                )
+            if any(asked):
+                # how far the guest leaves the host from the angle asked for (0 where
+                # a seam keeps the smooth join)
+                off = np.abs(measured.angles - (angle or 0.0))
+                off_angle_all.append(crease.CreaseMeasure(off, band, measured.noise))
             gap = metrics.seam_gap(X[part.seam], host.V[hc.indices], hc.closed)
             gaps.append(gap)
             dihedral = metrics.host_dihedral_angles(host.V, host.F, hc.indices)
@@ -1022,7 +1022,7 @@ class JoinSolver:
                     "input_crease_deg": crease.report([inputs]),
                     "join_angle_deg": angle,
                     "join_angle_error_deg": (
-                        crease.report([off_angle_all[-1]]) if angle is not None else None
+                        crease.report([off_angle_all[-1]]) if off_angle_all else None
                     ),
                     "crease_removed_deg": metrics.summary(
                         self.crease_removed[len(per_seam)]

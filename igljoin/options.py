@@ -94,8 +94,10 @@ class JoinOptions:
         the host, measured from the host's tangent plane continued across the
         seam — 0 is the paper's smooth join, an end-to-side graft leaves its
         vessel at 25–45°. One value for every seam, or one per seam (``None``
-        in a list keeps that seam's default). Default ``None``: remove the
-        crease the inputs meet at where it is coherent along the seam.
+        in a list keeps that seam's default). Default ``None``, the same as 0:
+        the smooth join. Either way the join removes the part of the crease
+        that is coherent along the seam and deviates significantly from the
+        angle asked for (:mod:`igljoin.band_targets`).
     join_side : {"guest", "normal", "opposite"}
         Towards which side of the host surface a positive ``join_angle``
         turns: the side the rest guest lies on (default), the side of the

@@ -379,9 +379,11 @@ def assess(result: Any) -> tuple[QualityWarning, ...]:
         )
     opt = result.options
     kept = bool(getattr(opt, "smooth", False)) and getattr(opt, "smooth_mode", "") == "band"
-    if kept and getattr(opt, "join_angle", None) is not None:
+    angle = getattr(opt, "join_angle", None)
+    angled = any(angle) if isinstance(angle, tuple) else bool(angle)
+    if kept and angled:
         # a crease was asked for: what counts is how far the guest is from it (a seam
-        # left at its default, None in the per-seam list, is not measured this way)
+        # left at its default, 0 or None in the per-seam list, by its crease itself)
         out += _join_angle_warning(m)
     else:
         out += _crease_warnings(m, kept)

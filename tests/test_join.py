@@ -358,3 +358,11 @@ def test_smooth_term_never_worse_on_a_guest_that_already_joins_smoothly():
         # the band measure is the same function of the same surfaces in both: any rise is the
         # term's doing; 0.05 deg is the smallest crease the term removes at all
         assert again.metrics["crease_deg"]["mean"] <= plain.metrics["crease_deg"]["mean"] + 0.05
+
+
+def test_join_angle_zero_is_the_smooth_join_exactly():
+    s = phantoms.paper_sample("end_to_end", "equal", resolution=0.5)
+    default = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve)
+    zero = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve, join_angle=0.0)
+    np.testing.assert_array_equal(zero.guest.V, default.guest.V)
+    assert [w.code for w in zero.warnings] == [w.code for w in default.warnings]

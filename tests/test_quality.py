@@ -513,9 +513,10 @@ def test_docs_list_every_code_with_its_threshold():
 def test_a_join_at_an_angle_is_judged_by_the_angle_asked_for():
     s = phantoms.paper_sample("end_to_end", "equal", resolution=0.5)
     asked = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve, join_angle=20.0)
-    # a 20-degree crease asked for and met (measured 0.3 deg away at most) is no warning
+    # a 20-degree crease asked for and met (issue 19's bar: the mean within 2 degrees) is
+    # no warning
     assert asked.metrics["crease_deg"]["mean"] > quality.CREASE_MAX_DEG
-    assert asked.metrics["join_angle_error_deg"]["max"] < 1.0
+    assert asked.metrics["join_angle_error_deg"]["mean"] <= 2.0
     assert "crease" not in _codes(asked)
     # a smooth term too weak to turn the guest leaves it far from the angle: warned
     weak = igljoin.join(
