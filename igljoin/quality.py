@@ -269,6 +269,19 @@ def _beyond_noise(m: dict, key: str) -> float | None:
     return _number(m, key, "max") if value is None else value
 
 
+def _where(si: dict) -> str:
+    """Where self-intersections are: the pairs per seam and the centre of each seam's."""
+    per_seam, centres = si.get("per_seam"), si.get("centres")
+    if not isinstance(per_seam, list) or not isinstance(centres, list):
+        return ""
+    parts = []
+    for i, (count, centre) in enumerate(zip(per_seam, centres)):
+        if count and isinstance(centre, list) and len(centre) == 3:
+            at = "(" + ", ".join(f"{c:.3g}" for c in centre) + ")"
+            parts.append((f"seam {i}: {count} " if len(per_seam) > 1 else "") + f"around {at}")
+    return (", " + "; ".join(parts)) if parts else ""
+
+
 def _join_angle_warning(m: dict) -> list[QualityWarning]:
     """``crease`` for a join at a given angle: the guest leaves the host at another one."""
     off = _beyond_noise(m, "join_angle_error_deg")
@@ -417,9 +430,11 @@ def assess(result: Any) -> tuple[QualityWarning, ...]:
                 "self_intersections",
                 f"{int(pairs)} pairs of faces of the welded mesh intersect within "
                 f"{si.get('rings')} rings of the seam (host-guest {si.get('host_guest')}, "
-                f"guest-guest {si.get('guest_guest')}, host-host {si.get('host_host')}); the "
-                "guest passes through the host or itself there: check the curves' direction and "
-                "which side the guest lies on, or lower smooth_weight",
+                f"guest-guest {si.get('guest_guest')}, host-host {si.get('host_host')})"
+                + _where(si)
+                + "; the guest passes through the host or itself there: check the curves' "
+                "direction and which side the guest lies on, or lower smooth_weight (an "
+                "end-to-side graft: a larger opening, a hood, see the seams page)",
                 int(pairs),
                 0,
             )

@@ -237,8 +237,10 @@ class JoinResult:
             :meth:`Welded.summary`, otherwise ``error`` (the message);
             ``self_intersections`` holds ``pairs`` (intersecting face pairs),
             ``host_guest``, ``guest_guest``, ``host_host`` (the same pairs by
-            the faces' sides), ``faces_tested`` and ``rings``; it is ``None``
-            when the weld failed.
+            the faces' sides), ``faces_tested``, ``rings``, ``per_seam`` (the
+            pairs by the seam nearest to them) and ``centres`` (per seam, the
+            mean centre of those pairs, or None); it is ``None`` when the weld
+            failed.
         """
         try:
             welded = self.merged
@@ -248,6 +250,8 @@ class JoinResult:
         band = ring_band(F, welded.seam, rings)
         pairs = self_intersections(welded.mesh.V, F, band)
         sides = welded.label[pairs].sum(axis=1)  # 0 host-host, 1 host-guest, 2 guest-guest
+        centres = welded.mesh.V[F[pairs]].mean(axis=(1, 2))  # (p, 3): each pair's centre
+        where = self._nearest_seams(centres)
         return {
             "weld": {"ok": True, **welded.summary()},
             "self_intersections": {
@@ -257,8 +261,30 @@ class JoinResult:
                 "host_host": int((sides == 0).sum()),
                 "faces_tested": int(band.sum()),
                 "rings": int(rings),
+                # where: the pairs by the seam nearest to them, and per seam the mean
+                # centre of its pairs (None without a pair)
+                "per_seam": [int(c) for c in np.bincount(where, minlength=len(self.seams))],
+                "centres": [
+                    centres[where == i].mean(axis=0).tolist() if (where == i).any() else None
+                    for i in range(len(self.seams))
+                ],
             },
         }
+
+    def _nearest_seams(self, points: np.ndarray) -> np.ndarray:
+        """Index of the seam whose host curve is nearest to each point (shape (p,))."""
+        if not len(points) or len(self.seams) < 2:
+            return np.zeros(len(points), dtype=np.int64)
+        dist = np.stack(
+            [
+                np.linalg.norm(
+                    points[:, None, :] - self.host.V[sm.host_curve][None, :, :], axis=2
+                ).min(axis=1)
+                for sm in self.seams
+            ],
+            axis=1,
+        )
+        return np.argmin(dist, axis=1)
 
     def report(self) -> dict:
         """Plain-JSON summary of the join: warnings, counts, timings, convergence, metrics, options.

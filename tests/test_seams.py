@@ -108,6 +108,15 @@ def test_an_opening_without_room_for_a_hood_is_reported():
     assert by_code["self_intersections"].value == si["pairs"]
     assert f"{si['pairs']} pairs of faces" in by_code["self_intersections"].message
     assert by_code["folds"].value == res.metrics["folded_pairs"]
+    # and where: every pair counted at the seam nearest to it, each seam's centre near
+    # its own opening (nearer to its host curve than to the other seam's)
+    assert sum(si["per_seam"]) == si["pairs"]
+    for i, (count, centre) in enumerate(zip(si["per_seam"], si["centres"])):
+        if count:
+            assert f"seam {i}: {count} around" in by_code["self_intersections"].message
+            curves = [res.host.V[sm.host_curve] for sm in res.seams]
+            d = [np.linalg.norm(P - centre, axis=1).min() for P in curves]
+            assert int(np.argmin(d)) == i
 
 
 def test_bypass_seams_belong_to_their_hosts(bypass, graft):
