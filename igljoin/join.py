@@ -653,13 +653,35 @@ class JoinSolver:
             )
         return list(angle)
 
-    def _host_fit(self, hc: SelectedCurve, band: float):
-        """The host's band fit along a curve, made once per solver (the host is rigid)."""
-        key = (hc.indices.tobytes(), bool(hc.closed), float(band))
-        cache = self.__dict__.setdefault("_host_fits", {})
+    def _host_cached(self, key: tuple, make):
+        """A value of the rigid host, made once per solver (``make()`` the first time)."""
+        cache = self.__dict__.setdefault("_host_values", {})
         if key not in cache:
-            cache[key] = band_fit(self.host.V, self.host.F, hc.indices, hc.closed, band)
+            cache[key] = make()
         return cache[key]
+
+    def _host_fit(self, hc: SelectedCurve, band: float):
+        """The host's band fit along a curve."""
+        key = ("band_fit", hc.indices.tobytes(), bool(hc.closed), float(band))
+        return self._host_cached(
+            key, lambda: band_fit(self.host.V, self.host.F, hc.indices, hc.closed, band)
+        )
+
+    def _host_inward(self, hc: SelectedCurve) -> np.ndarray:
+        """The host's one-ring inward directions along a curve (the one-ring crease's)."""
+        host = self.host if self._host_near is None else self._host_near
+        key = ("inward", hc.indices.tobytes(), bool(hc.closed))
+        return self._host_cached(
+            key, lambda: seam_frames(host.V, host.F, hc.indices, hc.closed).inward
+        )
+
+    def _host_dihedral(self, curve: np.ndarray) -> np.ndarray:
+        """The host's own dihedral angles near a curve (``metrics.host_dihedral_angles``)."""
+        host = self.host if self._host_near is None else self._host_near
+        key = ("dihedral", np.asarray(curve).tobytes())
+        return self._host_cached(
+            key, lambda: metrics.host_dihedral_angles(host.V, host.F, curve)
+        )
 
     def _band_term(
         self, hc: SelectedCurve, part, band: float, angle: float | None = None
@@ -981,7 +1003,9 @@ class JoinSolver:
             inputs = crease.input_crease(
                 host.V, host.F, hc.indices, c.V, c.F, at_host, hc.closed, band, host_fit
             )
-            onering = metrics.crease_angles(host.V, host.F, hc.indices, X, c.F, at_host, hc.closed)
+            onering = metrics.crease_angles(
+                host.V, host.F, hc.indices, X, c.F, at_host, hc.closed, self._host_inward(hc)
+            )
             measured_all.append(measured)
             inputs_all.append(inputs)
             onering_all.append(onering)
@@ -993,7 +1017,7 @@ class JoinSolver:
                 off_angle_all.append(crease.CreaseMeasure(off, band, measured.noise))
             gap = metrics.seam_gap(X[part.seam], host.V[hc.indices], hc.closed)
             gaps.append(gap)
-            dihedral = metrics.host_dihedral_angles(host.V, host.F, hc.indices)
+            dihedral = self._host_dihedral(hc.indices)
             seams.append(
                 JoinedSeam(
                     host_index=p.host_index,
@@ -1038,7 +1062,7 @@ class JoinSolver:
             start += s
         host_curve = np.concatenate([sm.host_curve for sm in seams])
         seam_creases = np.concatenate([sm.crease for sm in seams])
-        host_dihedral = metrics.host_dihedral_angles(host.V, host.F, host_curve)
+        host_dihedral = self._host_dihedral(host_curve)
         rows = sum(t.soft_rows for t in self.terms)
         counts = {
             "points": len(c.V),

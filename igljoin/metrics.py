@@ -36,10 +36,6 @@ Self-intersections
 
 from __future__ import annotations
 
-import threading
-import weakref
-from collections import OrderedDict
-
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -69,62 +65,6 @@ SELF_INTERSECTION_RINGS = 3
 
 #: Default number of rings around the host curve whose dihedral angles are measured.
 HOST_DIHEDRAL_RINGS = 2
-
-
-#: Values derived from a mesh's arrays alone, per vertex array: ``id(V)`` ->
-#: (weak reference to ``V``, private copies of ``V`` and ``F``, values), oldest first.
-_MEMO: OrderedDict[int, tuple] = OrderedDict()
-#: Meshes whose derived values are kept at once (the oldest is dropped first).
-_MEMO_MESHES = 8
-#: Serialises look-ups and insertions (joins may run in threads).
-_MEMO_LOCK = threading.RLock()
-
-
-def _mesh_memo(V: np.ndarray, F: np.ndarray) -> dict:
-    """A dict of values computed from ``(V, F)`` alone, kept across calls.
-
-    The entry is found by the identity of ``V`` and used only while ``V``
-    and ``F`` still hold exactly the values it was made for (compared with
-    private copies on every call): changed or different arrays get a fresh,
-    empty dict, so a value read from it is never stale. The entry goes when
-    ``V`` is garbage collected. Meant for the rigid host, whose arrays are
-    the same objects on every join with that ``Mesh``.
-
-    Parameters
-    ----------
-    V : ndarray, shape (n, 3)
-    F : ndarray of int, shape (m, 3)
-
-    Returns
-    -------
-    dict
-        Keys name the value and the other arguments it depends on.
-    """
-    key = id(V)
-    with _MEMO_LOCK:
-        entry = _MEMO.get(key)
-        if entry is not None:
-            ref, Vc, Fc, values = entry
-            if (
-                ref() is V
-                and Vc.shape == np.shape(V)
-                and Fc.shape == np.shape(F)
-                and np.array_equal(Vc, V)
-                and np.array_equal(Fc, F)
-            ):
-                return values
-        try:
-            ref = weakref.ref(V, lambda _, key=key: _MEMO.pop(key, None))
-        except TypeError:  # not weak-referenceable (not an ndarray): nothing kept
-            return {}
-        while len(_MEMO) >= _MEMO_MESHES:
-            try:
-                _MEMO.popitem(last=False)
-            except KeyError:  # emptied meanwhile by arrays going away
-                break
-        values: dict = {}
-        _MEMO[key] = (ref, np.array(V, copy=True), np.array(F, copy=True), values)
-        return values
 
 
 def area_ratio(V0: np.ndarray, V1: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -240,8 +180,9 @@ def crease_angles(
     Fg: np.ndarray,
     guest_at_host: np.ndarray,
     closed: bool,
+    host_inward: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Crease angle in degrees at each host curve vertex.
+    """One-ring crease angle in degrees at each host curve vertex.
 
     Parameters
     ----------
@@ -255,19 +196,18 @@ def crease_angles(
     guest_at_host : ndarray of int64, shape (k,)
         Guest vertex lying on each host curve vertex.
     closed : bool
+    host_inward : ndarray, shape (k, 3), optional
+        The host's one-ring inward directions along the curve
+        (:func:`igljoin.frames.seam_frames`), if already made (a solver keeps
+        them for its rigid host).
 
     Returns
     -------
     ndarray, shape (k,)
     """
     host_curve = np.asarray(host_curve, dtype=np.int64)
-    memo = _mesh_memo(Vh, Fh)
-    key = ("seam_frames", host_curve.tobytes(), bool(closed))
-    if key not in memo:
-        inward = seam_frames(Vh, Fh, host_curve, closed).inward
-        inward.flags.writeable = False
-        memo[key] = inward
-    host_inward = memo[key]
+    if host_inward is None:
+        host_inward = seam_frames(Vh, Fh, host_curve, closed).inward
     guest = seam_frames(Vg, Fg, guest_at_host, closed, curve_points=Vh[host_curve])
     cos = np.einsum("ij,ij->i", guest.inward, -host_inward)
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
@@ -430,13 +370,7 @@ def host_dihedral_angles(
     F = np.asarray(F, dtype=np.int64)
     curve = np.asarray(curve, dtype=np.int64)
     _check_rings(rings)
-    memo = _mesh_memo(V, F)
-    key = ("host_dihedral_angles", curve.tobytes(), int(rings))
-    if key not in memo:
-        angles = edge_dihedral_angles(V, F[ring_band(F, curve, rings)])[1]
-        angles.flags.writeable = False
-        memo[key] = angles
-    return memo[key].copy()
+    return edge_dihedral_angles(V, F[ring_band(F, curve, rings)])[1]
 
 
 def self_intersections(V: np.ndarray, F: np.ndarray, faces: np.ndarray | None = None) -> np.ndarray:

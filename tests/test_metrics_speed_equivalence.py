@@ -14,7 +14,6 @@ values), so every float is compared bit for bit and every count exactly.
 from __future__ import annotations
 
 import dataclasses
-import gc
 import importlib
 
 import igl
@@ -312,48 +311,27 @@ def test_crease_and_host_dihedral_angles_match_the_plain_computation(joins):
         assert res.metrics["crease_onering_deg"]["max"] == float(crease.max())
 
 
-# -- the host cache ---------------------------------------------------------------------------
+# -- the host's values, kept on the solver ---------------------------------------------------
 
 
-def test_host_cache_is_never_stale():
+def test_host_values_follow_the_arrays_and_are_kept_on_the_solver():
     s = phantoms.paper_sample("end_to_end", "equal", resolution=0.4)
     V, F, curve = s.host.V.copy(), s.host.F.copy(), s.host_curve  # writeable arrays
     first = metrics.host_dihedral_angles(V, F, curve)
-    first[:] = -1.0  # a caller writing into the result does not reach the cache
-    assert (metrics.host_dihedral_angles(V, F, curve) >= 0).all()
-    # move the vertices in place: the values follow the new positions
+    # a plain function of the arrays: moved in place, the values follow the new positions
     V *= np.array([1.0, 1.0, 3.0])
-    stretched = metrics.host_dihedral_angles(V, F, curve)
-    _assert_same(stretched, metrics.host_dihedral_angles(V.copy(), F, curve))
-    assert not np.array_equal(stretched, metrics.host_dihedral_angles(s.host.V, s.host.F, curve))
-    # change the faces in place: each face then starts at another corner, which rounds
-    # its normal differently; the values follow the new faces
-    F[:] = F[:, [1, 2, 0]]
-    turned = metrics.host_dihedral_angles(V, F, curve)
-    _assert_same(turned, metrics.host_dihedral_angles(V.copy(), F.copy(), curve))
-    assert not np.array_equal(turned, stretched)
-    # the same curve as int32 (other bytes) and another ring count are other keys
-    _assert_same(metrics.host_dihedral_angles(V, F, curve.astype(np.int32)), turned)
-    assert len(metrics.host_dihedral_angles(V, F, curve, rings=1)) < len(turned)
-    with pytest.raises(igljoin.OptionsError):
-        metrics.host_dihedral_angles(V, F, curve, rings=True)
-    # the entry goes with the array
-    key = id(V)
-    assert key in metrics._MEMO
-    del V
-    gc.collect()
-    assert key not in metrics._MEMO
-
-
-def test_host_cache_keeps_few_meshes():
-    rng = np.random.default_rng(4)
-    kept = []
-    for _ in range(metrics._MEMO_MESHES + 3):
-        V = rng.normal(size=(10, 3))
-        kept.append(V)
-        metrics._mesh_memo(V, np.array([[0, 1, 2]]))
-    assert len(metrics._MEMO) <= metrics._MEMO_MESHES
-
+    assert not np.array_equal(metrics.host_dihedral_angles(V, F, curve), first)
+    # a solver makes its rigid host's values once and reuses them on every solve
+    solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    a = solver.solve()
+    kept = dict(solver._host_values)
+    assert {key[0] for key in kept} == {"band_fit", "inward", "dihedral"}
+    b = solver.solve()
+    assert all(solver._host_values[key] is value for key, value in kept.items())
+    # and they are what the plain functions give
+    plain = metrics.host_dihedral_angles(s.host.V, s.host.F, s.host_curve)
+    assert b.metrics["host_dihedral_deg"]["max"] == float(plain.max())
+    assert a.metrics["crease_onering_deg"] == b.metrics["crease_onering_deg"]
 
 # -- point to polyline distances --------------------------------------------------------------
 
