@@ -117,6 +117,7 @@ def seam_crease(
     band: float | None = None,
     rest: np.ndarray | None = None,
     host_fit: BandFit | None = None,
+    rest_fit: BandFit | None = None,
 ) -> CreaseMeasure:
     """Crease between a guest lying on the host curve and the host, at band scale.
 
@@ -141,6 +142,9 @@ def seam_crease(
         is fitted as it lies (for a guest in place, the two agree).
     host_fit : BandFit, optional
         The host's band fit along ``host_curve`` at ``band``, if already made.
+    rest_fit : BandFit, optional
+        With ``rest``: the rest guest's band fit along ``guest_at_host``, if
+        already made.
 
     Returns
     -------
@@ -150,7 +154,7 @@ def seam_crease(
         band = default_band(Vh, Fh, host_curve, Vg, Fg, guest_at_host)
     host = host_fit or band_fit(Vh, Fh, host_curve, closed, band)
     if rest is not None:
-        guest = band_fit(rest, Fg, guest_at_host, closed, band)
+        guest = rest_fit or band_fit(rest, Fg, guest_at_host, closed, band)
         c = guest.weights @ np.asarray(Vg, dtype=np.float64)
         T = host.frames.tangent
         return _measure(guest, host, g=unit(c - np.einsum("ij,ij->i", c, T)[:, None] * T))
@@ -169,6 +173,7 @@ def input_crease(
     closed: bool,
     band: float,
     host_fit: BandFit | None = None,
+    guest_fit: BandFit | None = None,
 ) -> CreaseMeasure:
     """Crease at which the rest guest, moved rigidly onto the host curve, meets the host.
 
@@ -183,6 +188,9 @@ def input_crease(
         Band width in mesh units.
     host_fit : BandFit, optional
         The host's band fit along ``host_curve`` at ``band``, if already made.
+    guest_fit : BandFit, optional
+        The rest guest's band fit along ``guest_at_host`` at ``band``, if
+        already made.
 
     Returns
     -------
@@ -194,7 +202,7 @@ def input_crease(
     Vg = np.asarray(Vg, dtype=np.float64)
     R, _ = rigid_fit(Vg[guest_at_host], Vh[host_curve])
     host = host_fit or band_fit(Vh, Fh, host_curve, closed, band)
-    guest = band_fit(Vg, Fg, guest_at_host, closed, band)
+    guest = guest_fit or band_fit(Vg, Fg, guest_at_host, closed, band)
     return _measure(guest, host, R)
 
 

@@ -603,6 +603,7 @@ class JoinSolver:
             terms.append(StretchTerm(c.V, self.E, opt.stretch_weight * k))
         self.smooth_tolerances_deg = []
         self.crease_removed = []
+        self._rest_fits = {}  # the rest guest's band fits along its seams (see _result)
         self.bands = [
             opt.smooth_band
             or crease.default_band(
@@ -997,12 +998,20 @@ class JoinSolver:
             s = len(part.seam)
             at_host = part.seam[part.host_hit]
             host_fit = self._host_fit(hc, band)
+            # the rest guest is fixed too (until the next _prepare): its fit along the
+            # seam serves both measures, on every solve
+            key = (at_host.tobytes(), bool(hc.closed), float(band))
+            if key not in self._rest_fits:
+                self._rest_fits[key] = band_fit(c.V, c.F, at_host, hc.closed, band)
+            rest_fit = self._rest_fits[key]
             measured = crease.seam_crease(
-                host.V, host.F, hc.indices, X, c.F, at_host, hc.closed, band, c.V, host_fit
-            )
+                host.V, host.F, hc.indices, X, c.F, at_host, hc.closed, band, c.V, host_fit,
+                rest_fit,
+            )  # fmt: skip
             inputs = crease.input_crease(
-                host.V, host.F, hc.indices, c.V, c.F, at_host, hc.closed, band, host_fit
-            )
+                host.V, host.F, hc.indices, c.V, c.F, at_host, hc.closed, band, host_fit,
+                rest_fit,
+            )  # fmt: skip
             onering = metrics.crease_angles(
                 host.V, host.F, hc.indices, X, c.F, at_host, hc.closed, self._host_inward(hc)
             )
