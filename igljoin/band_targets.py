@@ -7,13 +7,16 @@ moved rigidly onto the host curve). ``φ`` is the crease the inputs meet at,
 plus the error of the fits: scan noise, the facets of a coarse mesh, a sliver.
 
 A crease that joining should remove is coherent along the seam (a tube that
-arrives at an angle, a patch whose boundary is too short): it survives an
-average over a stretch of seam several bands long. The error of the fits does
-not: it changes from one vertex to the next. So the join removes the average
-``φ̄`` — only where it stands clear of its own standard error — and keeps the
-rest, ``ψ = φ − shrink(φ̄)``, as the rest guest has it. A piece joined back
-where it was cut from then keeps its shape exactly (``φ̄`` is insignificant
-there), while a guest that meets the host at an angle is turned smooth.
+arrives at an angle, a patch whose boundary is too short): it is a smooth
+function of the position along the seam, spanning several band widths. The
+error of the fits is not: it changes from one vertex to the next. So ``φ`` is
+fitted by a few smooth modes along the seam (Fourier modes of a closed seam,
+Legendre polynomials of an open one), and the join removes each mode's
+deviation from the angle asked for (0: the smooth join; ``join_angle``) only
+as far as it stands clear of its standard error; the rest of ``φ`` is kept as
+the rest guest has it: ``ψ = φ − removed``. A piece joined back where it was
+cut from then keeps its shape exactly (its modes are insignificant), while a
+guest that meets the host at an angle is turned smooth.
 
 :func:`kept_elevation` computes ``ψ``; :func:`tilted_frames` tilts the host
 frames by it, which is all the smooth-join term needs.
