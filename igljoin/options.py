@@ -62,7 +62,9 @@ class JoinOptions:
     ----------
     smooth : bool
         Include the smooth-join term (paper §4.4). ``False`` gives the
-        paper's "without smooth join" variant.
+        paper's "without smooth join" variant. The term is in the energy only
+        when ``smooth`` is true *and* ``smooth_weight > 0``: either switch
+        turns it off, whatever the other says.
     shape_weight : float
         ``w_L``, weight of the Laplacian shape term (Eq. 4).
     stretch_weight : float
