@@ -29,6 +29,7 @@ import numpy as np
 from .bandfit import along_curve_reach
 from .correspond import rigid_fit
 from .frames import SeamFrames, unit
+from .polyline import arc_lengths, polyline_length, segment_lengths
 
 __all__ = [
     "kept_elevation",
@@ -56,13 +57,6 @@ SIGNIFICANCE_LEVEL = 0.975
 SMALLEST_REMOVED_DEG = 0.05
 
 
-def _arc_positions(P: np.ndarray, closed: bool) -> tuple[np.ndarray, float]:
-    Q = np.vstack([P, P[:1]]) if closed else P
-    seg = np.linalg.norm(np.diff(Q, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    return s[: len(P)], float(s[-1])
-
-
 def _seam_modes(P: np.ndarray, closed: bool, band: float) -> tuple[np.ndarray, np.ndarray]:
     """Smooth functions along the seam (k, m) and each vertex's share of its length (k,).
 
@@ -71,10 +65,9 @@ def _seam_modes(P: np.ndarray, closed: bool, band: float) -> tuple[np.ndarray, n
     many as fit :data:`BANDS_PER_MODE` bands into each half-period, at most
     :data:`MAX_MODE`.
     """
-    s, length = _arc_positions(P, closed)
+    s, length = arc_lengths(P, closed)
     k = len(P)
-    Q = np.vstack([P, P[:1]]) if closed else P
-    seg = np.linalg.norm(np.diff(Q, axis=0), axis=1)
+    seg = segment_lengths(P, closed)
     if closed:
         share = 0.5 * (seg + np.roll(seg, 1))
     else:
@@ -151,7 +144,7 @@ def kept_elevation(
     H = B.T @ (W[:, None] * B)
     Hinv = np.linalg.pinv(H)
     coef = Hinv @ (B.T @ (W * phi))
-    _, length = _arc_positions(targets, closed)
+    length = polyline_length(targets, closed)
     correlated = max(1.0, reach * len(phi) / max(length, 1e-300))
     A = Hinv @ (B.T * W)  # coef = A @ phi
     # the error of each φ is that of its two band fits (from their residuals),

@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .frames import SeamFrames, face_normals_areas, unit, vertex_face_matrix
+from .polyline import arc_lengths
 
 __all__ = [
     "BandFit",
@@ -104,21 +105,17 @@ def curve_tangents(P: np.ndarray, closed: bool, span: float) -> np.ndarray:
     """
     P = np.asarray(P, dtype=np.float64)
     k = len(P)
-    Q = np.vstack([P, P[:1]]) if closed else P
-    seg = np.linalg.norm(np.diff(Q, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    length = float(s[-1])
+    si, length = arc_lengths(P, closed)
     if length <= 0:
         return np.zeros((k, 3))
     half = 0.5 * min(float(span), 0.5 * length if closed else length)
-    si = s[:k]
     if closed:
         # unroll one period each side so that the chord may cross the start
-        S = np.concatenate([s[:-1] - length, s[:-1], s[:-1] + length, [2 * length]])
+        S = np.concatenate([si - length, si, si + length, [2 * length]])
         R = np.vstack([P, P, P, P[:1]])
         lo, hi = si - half, si + half
     else:
-        S, R = s, P
+        S, R = si, P
         lo, hi = np.maximum(si - half, 0.0), np.minimum(si + half, length)
 
     def at(t):
@@ -158,12 +155,9 @@ def along_curve_reach(
     k = len(P)
     if k < 3:
         return float("inf")
-    Q = np.vstack([P, P[:1]]) if closed else P
-    seg = np.linalg.norm(np.diff(Q, axis=0), axis=1)
-    length = float(seg.sum())
+    s, length = arc_lengths(P, closed)
     if normals is None:
         return ALONG_RADIUS_FRACTION * length / (2.0 * np.pi) if closed else float("inf")
-    s = np.concatenate([[0.0], np.cumsum(seg)])[:k]
     span = 0.1 * length if span is None else float(span)
     ahead = s + span
     if closed:

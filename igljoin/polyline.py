@@ -9,7 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["arc_length_parameters", "mean_segment", "polyline_length", "segment_lengths"]
+__all__ = [
+    "arc_length_parameters",
+    "arc_lengths",
+    "mean_segment",
+    "polyline_length",
+    "segment_lengths",
+]
 
 
 def segment_lengths(P: np.ndarray, closed: bool = True) -> np.ndarray:
@@ -45,6 +51,21 @@ def polyline_length(P: np.ndarray, closed: bool = True) -> float:
 def mean_segment(P: np.ndarray, closed: bool = True) -> float:
     """Mean segment length of a polyline ``P`` of shape (k, d), k ≥ 2 (the seam's length scale)."""
     return float(segment_lengths(P, closed).mean())
+
+
+def arc_lengths(P: np.ndarray, closed: bool = True) -> tuple[np.ndarray, float]:
+    """Arc length ``s`` (k,) from ``P[0]`` to each vertex of ``P`` (k, d), and the total length.
+
+    Examples
+    --------
+    >>> square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    >>> s, length = arc_lengths(square)
+    >>> s.tolist(), length
+    ([0.0, 1.0, 2.0, 3.0], 4.0)
+    """
+    seg = segment_lengths(P, closed)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    return cum[: len(P)], float(cum[-1])
 
 
 def arc_length_parameters(P: np.ndarray, closed: bool = True) -> tuple[np.ndarray, float]:
