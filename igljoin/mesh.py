@@ -24,6 +24,28 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     return a
 
 
+def _check_rows(A: np.ndarray, name: str, array: str, rows: str, layout: str, what: str) -> None:
+    """Refuse ``A`` unless it is a ``(rows, 3)`` table within the size guard.
+
+    Parameters
+    ----------
+    A : ndarray
+        The vertex or face array as given.
+    name : str
+        Mesh name, first in every message.
+    array, rows, layout, what : str
+        How the messages name the array (``"vertex array V"``), its row count
+        (``"n"``), what a row holds and what its rows are (``"vertices"``).
+    """
+    if A.ndim != 2 or A.shape[1] != 3:
+        raise MeshError(f"{name}: {array} has shape {A.shape}; it must be ({rows}, 3) ({layout})")
+    if A.shape[0] > MAX_ELEMENTS:
+        raise MeshError(
+            f"{name}: {A.shape[0]:,} {what} exceed the size guard of {MAX_ELEMENTS:,}; "
+            "decimate the mesh or raise igljoin.mesh.MAX_ELEMENTS"
+        )
+
+
 def _vertices(V: Any, name: str) -> np.ndarray:
     try:
         complex_input = np.iscomplexobj(np.asarray(V))
@@ -38,16 +60,7 @@ def _vertices(V: Any, name: str) -> np.ndarray:
             f"{name}: vertex array V cannot be converted to float64 ({exc}); "
             "pass an (n, 3) array of coordinates"
         ) from None
-    if V.ndim != 2 or V.shape[1] != 3:
-        raise MeshError(
-            f"{name}: vertex array V has shape {V.shape}; it must be (n, 3) "
-            "(one row of x, y, z per vertex)"
-        )
-    if V.shape[0] > MAX_ELEMENTS:
-        raise MeshError(
-            f"{name}: {V.shape[0]:,} vertices exceed the size guard of {MAX_ELEMENTS:,}; "
-            "decimate the mesh or raise igljoin.mesh.MAX_ELEMENTS"
-        )
+    _check_rows(V, name, "vertex array V", "n", "one row of x, y, z per vertex", "vertices")
     bad = ~np.isfinite(V).all(axis=1)
     if bad.any():
         idx = np.flatnonzero(bad)
@@ -67,16 +80,7 @@ def _faces(F: Any, n: int, name: str) -> np.ndarray:
         ) from None
     if Fa.size == 0:
         raise MeshError(f"{name}: the mesh has no faces; pass at least one triangle in F")
-    if Fa.ndim != 2 or Fa.shape[1] != 3:
-        raise MeshError(
-            f"{name}: face array F has shape {Fa.shape}; it must be (m, 3) "
-            "(triangles; triangulate polygons first)"
-        )
-    if Fa.shape[0] > MAX_ELEMENTS:
-        raise MeshError(
-            f"{name}: {Fa.shape[0]:,} faces exceed the size guard of {MAX_ELEMENTS:,}; "
-            "decimate the mesh or raise igljoin.mesh.MAX_ELEMENTS"
-        )
+    _check_rows(Fa, name, "face array F", "m", "triangles; triangulate polygons first", "faces")
     if not np.issubdtype(Fa.dtype, np.integer):
         if (
             np.issubdtype(Fa.dtype, np.floating)

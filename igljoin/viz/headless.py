@@ -339,21 +339,15 @@ def render(
     title: str | None = None,
     limit: float = colors.AREA_RATIO_LIMIT,
 ) -> Path:
-    """Render a join to a PNG file, headless.
+    """Render a join to a PNG file, headless: :func:`picture`, saved.
 
     Parameters
     ----------
     result : JoinResult
     path : str or os.PathLike
         Output ``.png``; its directory must exist. Written atomically.
-    view : {"side", "along", "both"}
-        Across the seam, along it, or both side by side.
-    size : (int, int)
-        Picture width and height in pixels.
-    title : str, optional
-        Case name for the title line (default: the mesh names).
-    limit : float
-        Area ratio drawn at full red (``1 / limit`` at full blue).
+    view, size, title, limit
+        As in :func:`picture`.
 
     Returns
     -------
