@@ -263,11 +263,9 @@ def band_fit(
 
     Parameters
     ----------
-    V : ndarray, shape (n, 3)
-    F : ndarray of int64, shape (m, 3)
-    curve : ndarray of int64, shape (k,)
-        Ordered boundary vertices (the fits' anchors).
-    closed : bool
+    V, F, curve, closed
+        The mesh and its boundary curve, as in :func:`igljoin.frames.seam_frames`;
+        the curve vertices are the fits' anchors.
     band : float
         Band width (> 0), in mesh units: the vertices within this distance of a
         curve vertex (and on the same sheet of the surface) enter its fit.

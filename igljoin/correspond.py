@@ -221,8 +221,8 @@ def _shift_estimates(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
     Parameters
     ----------
-    X, Y : ndarray, shape (s, 3)
-        Host and guest samples.
+    X, Y
+        As in :func:`_best_cyclic_shift`.
 
     Returns
     -------

@@ -75,12 +75,10 @@ def default_band(
 
     Parameters
     ----------
-    Vh : ndarray, shape (n_h, 3)
-    Fh : ndarray of int64, shape (m_h, 3)
-    host_curve : ndarray of int64, shape (k,)
-    Vg : ndarray, shape (n_g, 3)
-    Fg : ndarray of int64, shape (m_g, 3)
+    Vh, Fh, host_curve, Vg, Fg
+        As in :func:`seam_crease`.
     guest_curve : ndarray of int64, shape (s,)
+        Guest curve vertices.
 
     Returns
     -------

@@ -186,16 +186,9 @@ def crease_angles(
 
     Parameters
     ----------
-    Vh : ndarray, shape (n_h, 3)
-    Fh : ndarray of int64, shape (m_h, 3)
-    host_curve : ndarray of int64, shape (k,)
-        Ordered host curve vertices.
-    Vg : ndarray, shape (n_g, 3)
-    Fg : ndarray of int64, shape (m_g, 3)
-        Guest surface (deformed, or in place for an uncut reference).
-    guest_at_host : ndarray of int64, shape (k,)
-        Guest vertex lying on each host curve vertex.
-    closed : bool
+    Vh, Fh, host_curve, Vg, Fg, guest_at_host, closed
+        The host, its curve and the guest lying on it, as in
+        :func:`igljoin.crease.seam_crease`.
     host_inward : ndarray, shape (k, 3), optional
         The host's one-ring inward directions along the curve
         (:func:`igljoin.frames.seam_frames`), if already made (a solver keeps
