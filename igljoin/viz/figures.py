@@ -342,6 +342,49 @@ def _vertical_text(img: Any, text: str, box: tuple, font: Any, background: tuple
     img.paste(strip, (x + (w - strip.width) // 2, y + (h - strip.height) // 2))
 
 
+def _canvas(
+    size: tuple[int, int],
+    background: tuple,
+    shots: list[tuple[tuple[int, int], np.ndarray]],
+    title: str,
+    explanation: str,
+    font_size: int,
+) -> tuple[Any, Any]:
+    """A figure's canvas with its rendered panels pasted and its title band written.
+
+    Parameters
+    ----------
+    size : (int, int)
+        Canvas width and height in pixels.
+    background : (int, int, int)
+        Canvas colour (the renderer's background).
+    shots : list of ((int, int), ndarray of uint8, shape (h, w, 3))
+        Top-left corner of each panel and its rendered pixels.
+    title : str
+        Title line, in the large font.
+    explanation : str
+        The line under the title, in the small font.
+    font_size : int
+        Size of the large font (:func:`igljoin.viz.overlay.fonts`).
+
+    Returns
+    -------
+    img : PIL.Image.Image
+    draw : PIL.ImageDraw.ImageDraw
+        Drawing on ``img``, for the rest of the figure.
+    """
+    PIL = pillow()
+    img = PIL.Image.new("RGB", size, background)
+    for xy, rgb in shots:
+        img.paste(PIL.Image.fromarray(rgb), xy)
+    draw = PIL.ImageDraw.Draw(img)
+    font, small = fonts(font_size)
+    fs = font_size
+    draw.text((fs // 2, fs // 3), title, fill=_TEXT, font=font)
+    draw.text((fs // 2, fs // 3 + round(1.4 * fs)), explanation, fill=_DIM, font=small)
+    return img, draw
+
+
 def paper_figure(runs: Sequence[Any], title: str = "") -> Any:
     """Draw one paper figure from the runs of one scenario.
 
@@ -360,7 +403,7 @@ def paper_figure(runs: Sequence[Any], title: str = "") -> Any:
     """
     if not runs:
         raise OptionsError("paper_figure needs at least one SampleRun (one per column)")
-    PIL = pillow()
+    pillow()  # fail early, before polyscope starts, if Pillow is missing
     ensure_init(headless=True)
     lay = figure_layout(columns=len(runs))
     pw, ph = lay.panel_size
@@ -375,7 +418,7 @@ def paper_figure(runs: Sequence[Any], title: str = "") -> Any:
         panels = _column_panels(run, pw / ph, limit)
         for row, (host, guest, face_colors, cam) in enumerate(panels):
             rgb, background = render_meshes(host, guest, face_colors, cam, (pw, ph), bounds=box)
-            shots.append((lay.panel(row, col), rgb))
+            shots.append((lay.panel(row, col)[:2], rgb))
         if run.sample.scenario in SEAM_INSET_SCENARIOS:
             close, k = seam_closeup(run)
             point = run.smooth.host.V[run.smooth.host_curve[k]]
@@ -383,22 +426,19 @@ def paper_figure(runs: Sequence[Any], title: str = "") -> Any:
                 host, guest, face_colors, cam = panels[row]
                 rgb, _ = render_meshes(host, guest, face_colors, close, (iw, ih), bounds=box)
                 insets.append((row, col, rgb, point, cam, float(res.crease[k])))
-    img = PIL.Image.new("RGB", lay.size, background)
-    for (x, y, _, _), rgb in shots:
-        img.paste(PIL.Image.fromarray(rgb), (x, y))
-    draw = PIL.ImageDraw.Draw(img)
-    font, small = fonts(lay.font_size)
     fs = lay.font_size
-    for row, col, rgb, point, cam, crease in insets:
-        _draw_inset(img, draw, lay.panel(row, col), rgb, point, cam, crease, small)
-    draw.text((fs // 2, fs // 3), title, fill=_TEXT, font=font)
-    draw.text(
-        (fs // 2, fs // 3 + round(1.4 * fs)),
+    font, small = fonts(fs)
+    img, draw = _canvas(
+        lay.size,
+        background,
+        shots,
+        title,
         "Guest coloured by area ratio (deformed / rest) on one scale for the whole figure: "
         "blue shrink, white no change, red stretch. Host (rigid) in grey-green.",
-        fill=_DIM,
-        font=small,
+        fs,
     )
+    for row, col, rgb, point, cam, crease in insets:
+        _draw_inset(img, draw, lay.panel(row, col), rgb, point, cam, crease, small)
     draw.text(
         (fs // 2, fs // 3 + round(2.5 * fs)),
         f"Rows 1 to 3 of a column share one camera; row 4 looks along the seam's long axis, "
@@ -524,7 +564,7 @@ def end_to_side_figure(cases: Sequence[tuple[str, Any]], title: str = "") -> Any
     """
     if not cases or any(len(res.seams) != 2 for _, res in cases):
         raise OptionsError("end_to_side_figure needs (caption, result) pairs of two-seam joins")
-    PIL = pillow()
+    pillow()  # fail early, before polyscope starts, if Pillow is missing
     ensure_init(headless=True)
     pw, ph = END_TO_SIDE_PANEL
     fs = 16
@@ -563,17 +603,14 @@ def end_to_side_figure(cases: Sequence[tuple[str, Any]], title: str = "") -> Any
             rgb, background = render_meshes(res.host, res.guest, face, cam, (pw, ph), bounds=box)
             y = title_h + header_h + row * (caption_h + ph) + caption_h
             shots.append(((col * pw, y), rgb))
-    img = PIL.Image.new("RGB", size, background)
-    for xy, rgb in shots:
-        img.paste(PIL.Image.fromarray(rgb), xy)
-    draw = PIL.ImageDraw.Draw(img)
-    draw.text((fs // 2, fs // 3), title, fill=_TEXT, font=font)
-    draw.text(
-        (fs // 2, fs // 3 + round(1.4 * fs)),
+    img, draw = _canvas(
+        size,
+        background,
+        shots,
+        title,
         "Seen across the graft's plane, so each seam is in profile. Guest coloured by area "
         "ratio (deformed / rest): blue shrink, white no change, red stretch. Host in grey-green.",
-        fill=_DIM,
-        font=small,
+        fs,
     )
     for col, header in enumerate(END_TO_SIDE_COLUMNS):
         draw.text(
