@@ -97,9 +97,8 @@ class FigureLayout:
 
     Attributes
     ----------
-    size : (int, int)
-        Canvas width and height.
-    font_size : int
+    size, font_size
+        As in :class:`igljoin.viz.overlay.Layout`.
     title_height : int
         Title band (title and one explanatory line).
     header_height : int
