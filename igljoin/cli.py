@@ -69,31 +69,27 @@ def _point_arg(text: str) -> list[float]:
     return value
 
 
-def _nonnegative_int(text: str) -> int:
+def _number_arg(text: str, kind: type, accept: Any, what: str) -> Any:
+    """``kind(text)`` if it converts and ``accept`` holds for it; else the message ``what``."""
     try:
-        value = int(text)
+        value = kind(text)
     except ValueError:
-        value = -1
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer >= 0")
+        value = None
+    if value is None or not accept(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not {what}")
     return value
+
+
+def _nonnegative_int(text: str) -> int:
+    return _number_arg(text, int, lambda v: v >= 0, "an integer >= 0")
 
 
 def _positive_int(text: str) -> int:
-    value = _nonnegative_int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer >= 1")
-    return value
+    return _number_arg(text, int, lambda v: v >= 1, "an integer >= 1")
 
 
 def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number")
-    return value
+    return _number_arg(text, float, lambda v: math.isfinite(v) and v > 0, "a positive number")
 
 
 def _option_value(text: str) -> Any:
