@@ -8,10 +8,9 @@ do the same work as one loop over vertices or edges each, compiled by numba
 (``cache=True``: compiled once per machine, then loaded from the cache).
 
 They are exact re-statements of the numpy local steps in
-:mod:`igljoin.terms` (which stay as the reference implementation; the tests
-compare both to rounding). Setting the environment variable
-``IGLJOIN_KERNELS=0`` before importing igljoin makes the terms use the numpy
-path instead.
+:mod:`igljoin.terms`, which stay as the reference implementation: a term
+built with ``compiled=False`` runs them, and the tests compare both paths
+to rounding.
 
 Layouts: positions ``X`` (n, 3); edges ``E`` (e, 2) with edge vectors
 ``d_e = X[E[e, 0]] − X[E[e, 1]]``; rotations (n, 3, 3); half-gradients are
@@ -21,13 +20,11 @@ Layouts: positions ``X`` (n, 3); edges ``E`` (e, 2) with edge vectors
 from __future__ import annotations
 
 import math
-import os
 
 import numba as nb
 import numpy as np
 
 __all__ = [
-    "ENABLED",
     "edge_vectors",
     "shape_rotations",
     "shape_residuals",
@@ -37,9 +34,6 @@ __all__ = [
     "lbfgs_first_loop",
     "lbfgs_second_loop",
 ]
-
-#: Whether the terms use these kernels (``IGLJOIN_KERNELS=0`` turns them off).
-ENABLED = os.environ.get("IGLJOIN_KERNELS", "1") != "0"
 
 # Newton on SO(3): same constants as igljoin.rotations (step below which a rotation
 # has settled, steps before the SVD decides, relative margin of the maximum condition)
