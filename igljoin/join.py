@@ -575,7 +575,7 @@ class JoinSolver:
         parts = []
         for p in self.pairs:
             part = correspond(
-                V, F, p.guest_curve, self.host.V, p.host_curve, snap_tolerance=opt.snap_tolerance
+                V, F, p.guest_curve, self.host.V, p.host_curve, snap_fraction=opt.snap_fraction
             )
             V, F = part.V, part.F
             parts.append(part)
@@ -601,7 +601,7 @@ class JoinSolver:
         if opt.stretch_weight > 0:
             k = edge_stiffness(self.E, c.F, *self._stiffness())
             terms.append(StretchTerm(c.V, self.E, opt.stretch_weight * k))
-        self.smooth_tolerances_deg = []
+        self.smooth_keep_degs = []
         self.crease_removed = []
         self._rest_fits = {}  # the rest guest's band fits along its seams (see _result)
         self.bands = [
@@ -622,8 +622,8 @@ class JoinSolver:
                 radius = radius or None
                 frames = seam_frames(self.host.V, self.host.F, hc.indices, hc.closed, radius=radius)
                 at_seam = _interpolate_frames(frames, part.host_edge, part.host_edge_t, hc.closed)
-                tolerance = self._smooth_tolerance(frames, hc)
-                self.smooth_tolerances_deg.append(tolerance)
+                tolerance = self._smooth_keep_deg(frames, hc)
+                self.smooth_keep_degs.append(tolerance)
                 terms.append(
                     SmoothJoinTerm(
                         c.V,
@@ -635,7 +635,7 @@ class JoinSolver:
                         np.radians(tolerance),
                     )
                 )
-        self.smooth_tolerance_deg = max(self.smooth_tolerances_deg, default=0.0)
+        self.smooth_keep_deg = max(self.smooth_keep_degs, default=0.0)
         self.terms = terms
         t2 = time.perf_counter()
         self.solver = LocalGlobalSolver(terms, len(c.V), c.seam, opt.linear_solver)
@@ -692,7 +692,7 @@ class JoinSolver:
         The host's band-fitted tangent planes at the seam targets are tilted by
         the elevation the join keeps (the rest guest's, less the crease coherent
         along the seam), and the guest's band-fitted direction off each seam
-        vertex is pulled into them. ``smooth_tolerance`` widens that into a wedge.
+        vertex is pulled into them. ``smooth_keep_deg`` widens that into a wedge.
         """
         c, opt = self.corr, self.options
         host_fit = self._host_fit(hc, band)
@@ -716,8 +716,8 @@ class JoinSolver:
             join_side=opt.join_side,
         )
         self.crease_removed.append(np.degrees(np.abs(removed)))
-        tolerance = float(opt.smooth_tolerance or 0.0)
-        self.smooth_tolerances_deg.append(tolerance)
+        tolerance = float(opt.smooth_keep_deg or 0.0)
+        self.smooth_keep_degs.append(tolerance)
         return SmoothJoinTerm(
             c.V,
             c.F,
@@ -729,17 +729,17 @@ class JoinSolver:
             fit=guest_fit,
         )
 
-    def _smooth_tolerance(self, smoothed: SeamFrames, hc: SelectedCurve) -> float:
+    def _smooth_keep_deg(self, smoothed: SeamFrames, hc: SelectedCurve) -> float:
         """Crease (degrees) the robust smooth join tolerates: the host's own normal noise.
 
         The median angle between the host's one-ring and smoothed cross-seam
-        directions along the curve ``hc``, unless ``smooth_tolerance`` is given.
+        directions along the curve ``hc``, unless ``smooth_keep_deg`` is given.
         """
         opt = self.options
-        if opt.smooth_mode == "paper" or (opt.smooth_tolerance is None and opt.smooth_radius == 0):
+        if opt.smooth_mode == "paper" or (opt.smooth_keep_deg is None and opt.smooth_radius == 0):
             return 0.0
-        if opt.smooth_tolerance is not None:
-            return float(opt.smooth_tolerance)
+        if opt.smooth_keep_deg is not None:
+            return float(opt.smooth_keep_deg)
         onering = seam_frames(self.host.V, self.host.F, hc.indices, hc.closed)
         cos = np.clip(np.einsum("ij,ij->i", onering.inward, smoothed.inward), -1.0, 1.0)
         return float(np.degrees(np.median(np.arccos(cos))))
@@ -932,7 +932,7 @@ class JoinSolver:
             X0,
             bc,
             max_iterations=opt.max_iterations,
-            tolerance=opt.tolerance,
+            tolerance=opt.energy_tolerance,
             time_limit=opt.time_limit,
             scale=self.guest_mean_edge,
             acceleration=opt.acceleration,

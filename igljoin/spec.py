@@ -52,7 +52,7 @@ from .clean import (
 )
 from .errors import OptionsError, SpecError
 from .io import SUPPORTED_SUFFIXES
-from .options import JoinOptions
+from .options import JoinOptions, new_names
 from .outputs import file_sha256
 
 if sys.version_info >= (3, 11):
@@ -661,6 +661,10 @@ def parse_options(
     """
     if not isinstance(raw, Mapping):
         raise SpecError(f"{where}: [options] must be a table of option = value pairs")
+    try:
+        raw = new_names(raw, f"{where}: [options]")  # old names: a DeprecationWarning
+    except OptionsError as exc:
+        raise SpecError(str(exc)) from None
     valid = _join_option_names() + ("cleanup", "resample")
     _unknown(raw, valid, f"{where}: [options]", "options")
     opts = {k: v for k, v in raw.items() if k not in ("cleanup", "resample")}

@@ -471,5 +471,5 @@ def check_welded(welded: Welded, *, full: bool = False) -> None:
         raise WeldError(
             f"weld: {flat.size} faces have zero area {_offenders(welded, checked[flat])}; a guest "
             "seam vertex coincides with a host vertex it was not matched to — raise "
-            "snap_tolerance or refine the guest near the seam"
+            "snap_fraction or refine the guest near the seam"
         )

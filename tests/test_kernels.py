@@ -114,7 +114,7 @@ def test_stretch_kernel_equals_numpy_with_a_collapsed_edge(tube):
     [
         {"smooth_mode": "robust"},
         {"smooth_mode": "paper"},
-        {"smooth_mode": "robust", "smooth_tolerance": 5.0},
+        {"smooth_mode": "robust", "smooth_keep_deg": 5.0},
     ],
     ids=["robust", "paper", "wedge"],
 )
