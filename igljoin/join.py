@@ -27,6 +27,7 @@ from .boundary import Curve, SelectedCurve, boundary_loops, select_curve
 from .correspond import Correspondence, correspond, pair_seams, rigid_fit
 from .errors import CurveError, MeshError, OptionsError
 from .frames import SeamFrames, face_normals_areas, seam_frames, unit
+from .measure import combined_gap
 from .mesh import Mesh, as_mesh
 from .options import JoinOptions
 from .polyline import mean_segment
@@ -183,19 +184,6 @@ def _combined_correspondence(parts: list[Correspondence], host_sizes: list[int])
         inserted_from=np.vstack([c.inserted_from.reshape(-1, 2) for c in parts]),
         inserted_t=np.concatenate([c.inserted_t for c in parts]),
     )
-
-
-def _combined_gap(gaps: list[dict], counts: list[int]) -> dict:
-    """Seam gap over several seams: largest maximum, mean over all seam vertices."""
-    if len(gaps) == 1:
-        return gaps[0]
-    w = np.asarray(counts, dtype=np.float64) / float(sum(counts))
-    return {
-        "max": max(g["max"] for g in gaps),
-        "mean": float(sum(wi * g["mean"] for wi, g in zip(w, gaps))),
-        "relative_max": max(g["relative_max"] for g in gaps),
-        "relative_mean": float(sum(wi * g["relative_mean"] for wi, g in zip(w, gaps))),
-    }
 
 
 #: A host with more faces than this is checked near its curves only (see _check_host).
@@ -1088,7 +1076,7 @@ class JoinSolver:
             face_normals_areas(X, c.F)[1].sum() / face_normals_areas(c.V, c.F)[1].sum()
         )
         m = {
-            "seam_gap": _combined_gap(gaps, [len(sm.seam) for sm in seams]),
+            "seam_gap": combined_gap(gaps, [len(sm.seam) for sm in seams]),
             "crease_deg": crease.report(measured_all),
             "crease_onering_deg": metrics.summary(np.concatenate(onering_all)),
             "input_crease_deg": crease.report(inputs_all),
@@ -1112,10 +1100,8 @@ class JoinSolver:
             host=self.host,
             guest=guest,
             rest_guest=rest,
-            seam=c.seam.copy(),
-            host_curve=host_curve,
+            seams=seams,
             seam_targets=np.array(bc),
-            closed=all(sm.closed for sm in seams),
             area_ratio=ratio,
             converged=run.converged,
             iterations=run.iterations,
@@ -1127,8 +1113,6 @@ class JoinSolver:
             crease=seam_creases,
             metrics=m,
             stop_reason=run.reason,
-            pairing=dict(self.pairing),
-            seams=seams,
             host_offsets=self.host_offsets.copy(),
         )
         # weld (kept in the result) and count self-intersections near the seam

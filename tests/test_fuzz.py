@@ -215,7 +215,7 @@ def test_random_joins_weld_cleanly():
             outcomes["join refused"] += 1
             return
         try:
-            welded = igljoin.weld(res)
+            welded = res.weld()
         except igljoin.WeldError:  # a documented refusal (zero-area or 3-face seam edges)
             outcomes["weld refused"] += 1
             return
