@@ -63,6 +63,20 @@ def incidence(E: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     return ptr, (order // 2).astype(np.int64)
 
 
+@nb.njit(cache=True, inline="always")
+def _add_opposite(G, i, j, r0, r1, r2):  # pragma: no cover - compiled
+    """Add ``r`` to row ``i`` of ``G`` (n, 3) and subtract it from row ``j``.
+
+    The half-gradient of a residual of the difference ``X[i] − X[j]``.
+    """
+    G[i, 0] += r0
+    G[i, 1] += r1
+    G[i, 2] += r2
+    G[j, 0] -= r0
+    G[j, 1] -= r1
+    G[j, 2] -= r2
+
+
 @nb.njit(cache=True)
 def edge_vectors(X, E):  # pragma: no cover - compiled
     """``X[E[:, 0]] − X[E[:, 1]]``, shape (e, 3)."""
@@ -304,12 +318,7 @@ def shape_residuals(LX, d, Lp, Li, Lx, delta, E, rest_edges, mu, w, R, G):  # pr
                 s1 = ri + rj
             else:
                 s2 = ri + rj
-        G[i, 0] += wm * s0
-        G[i, 1] += wm * s1
-        G[i, 2] += wm * s2
-        G[j, 0] -= wm * s0
-        G[j, 1] -= wm * s1
-        G[j, 2] -= wm * s2
+        _add_opposite(G, i, j, wm * s0, wm * s1, wm * s2)
     return w * (energy_lap + mu * energy_edges)
 
 
@@ -352,12 +361,7 @@ def stretch_local(d, E, k, rest_length, rest, R, G):  # pragma: no cover - compi
             r0 *= k[e]
             r1 *= k[e]
             r2 *= k[e]
-        G[i, 0] += r0
-        G[i, 1] += r1
-        G[i, 2] += r2
-        G[j, 0] -= r0
-        G[j, 1] -= r1
-        G[j, 2] -= r2
+        _add_opposite(G, i, j, r0, r1, r2)
     return energy
 
 
@@ -426,12 +430,7 @@ def smooth_local(
         r2 = d2 - t2
         wp = weights[p]
         energy += wp * (r0 * r0 + r1 * r1 + r2 * r2)
-        G[f, 0] += wp * r0
-        G[f, 1] += wp * r1
-        G[f, 2] += wp * r2
-        G[s, 0] -= wp * r0
-        G[s, 1] -= wp * r1
-        G[s, 2] -= wp * r2
+        _add_opposite(G, f, s, wp * r0, wp * r1, wp * r2)
     return energy
 
 

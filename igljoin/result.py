@@ -249,22 +249,19 @@ class JoinResult:
     def measure_weld(self, rings: int = SELF_INTERSECTION_RINGS) -> dict:
         """Weld (kept as :attr:`merged`) and count self-intersections near the seam.
 
-        Run by every join; :func:`igljoin.measure.weld_metrics` of
-        :attr:`merged`, or the weld's error (recorded, not raised).
+        Run by every join: :func:`igljoin.measure.weld_metrics` of
+        :attr:`merged` (``rings`` as there), or, when the weld fails,
+        ``{"weld": {"ok": False, "error": message}, "self_intersections":
+        None}`` (recorded, not raised).
 
         Parameters
         ----------
         rings : int
-            Faces of the welded mesh within this many rings of the seam are
-            tested against each other (:func:`igljoin.metrics.ring_band`).
+            Width of the tested band around the seam, in face rings.
 
         Returns
         -------
         dict
-            ``{"weld": {...}, "self_intersections": {...}}``, plain JSON (see
-            :func:`igljoin.measure.weld_metrics`); ``weld`` holds ``ok`` and
-            ``error`` (the message) when the weld failed, and
-            ``self_intersections`` is then ``None``.
         """
         try:
             welded = self.merged
