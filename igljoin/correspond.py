@@ -499,7 +499,7 @@ def correspond(
     Vh: np.ndarray,
     host: SelectedCurve,
     *,
-    snap_tolerance: float = 0.1,
+    snap_fraction: float = 0.1,
 ) -> Correspondence:
     """Map the curves onto each other and insert host points into the guest.
 
@@ -513,7 +513,7 @@ def correspond(
     Vh : ndarray, shape (n_h, 3)
         Host vertices.
     host : SelectedCurve
-    snap_tolerance : float
+    snap_fraction : float
         A host point whose image on the guest curve is within this fraction
         of the local guest edge length of an existing guest vertex is
         matched to that vertex instead of inserting a new one.
@@ -539,7 +539,7 @@ def correspond(
     near_dist = np.minimum(frac, 1.0 - frac)
     if closed:
         near = near % n_u
-    snap = near_dist <= snap_tolerance
+    snap = near_dist <= snap_fraction
     if not closed:
         snap[0] = snap[-1] = True  # start meets start and end meets end
         near[0], near[-1] = 0, n_u - 1

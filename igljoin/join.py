@@ -13,24 +13,26 @@ the fixed vertices of one factorization.
 
 from __future__ import annotations
 
-import copy
 import time
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from . import band_targets, crease, metrics
+from . import seams as seams_
 from .bandfit import band_fit
-from .boundary import Curve, SelectedCurve, boundary_loops, select_curve
-from .correspond import Correspondence, correspond, pair_seams, rigid_fit
-from .errors import CurveError, MeshError, OptionsError
+from .boundary import SelectedCurve, boundary_loops
+from .correspond import rigid_fit
+from .errors import OptionsError
 from .frames import SeamFrames, face_normals_areas, seam_frames, unit
+from .measure import combined_gap
 from .mesh import Mesh, as_mesh
 from .options import JoinOptions
 from .polyline import mean_segment
 from .result import JoinedSeam, JoinResult
+from .seams import SeamPair
 from .solve import LocalGlobalSolver
 from .stiffness import stiffness_from_attribute, stiffness_from_regions
 from .terms import (
@@ -40,14 +42,16 @@ from .terms import (
     edge_stiffness,
     unique_edges,
 )
-from .validate import check_guest_reaches_seam, check_seam_scales, check_surface
+from .validate import check_surface
 
 __all__ = ["JoinSolver", "JoinResult", "SeamPair", "SolveProgress", "join"]
 
 # options that change the quadratic form (and so need a new factorization)
 _STRUCTURAL = JoinOptions.structural_fields()
 
-_SHOWN = 5  # shared vertices listed in an error message
+#: A host with more faces than this is checked near its curves only
+#: (:func:`igljoin.seams.host_neighbourhood`).
+HOST_CHECK_ALL_FACES = 200_000
 
 
 
@@ -62,247 +66,6 @@ def _interpolate_frames(frames: SeamFrames, edge: np.ndarray, t: np.ndarray, clo
     inward = lerp(frames.inward)
     inward = unit(inward - np.einsum("ij,ij->i", inward, normal)[:, None] * normal)
     return SeamFrames(normal=normal, tangent=lerp(frames.tangent), inward=inward)
-
-
-@dataclass(frozen=True)
-class SeamPair:
-    """The two curves of one seam, resolved and paired.
-
-    Attributes
-    ----------
-    host_index : int
-        Host mesh the curve is on (0 for a single host mesh).
-    host_curve : SelectedCurve
-        On the combined host (indices into ``JoinSolver.host``).
-    guest_curve : SelectedCurve
-        On the guest, paired: guest vertex 0 corresponds to host vertex 0.
-    pairing : dict
-        Rigid-fit residuals of the start search (see :func:`pair_curves`).
-    """
-
-    host_index: int
-    host_curve: SelectedCurve
-    guest_curve: SelectedCurve
-    pairing: dict = field(default_factory=dict)
-
-
-def _host_list(host: Any) -> list | None:
-    """The host meshes if ``host`` is a list of meshes, else ``None`` (one mesh)."""
-    if not isinstance(host, (list, tuple)) or not host:
-        return None
-    if all(isinstance(h, Mesh) for h in host):
-        return list(host)
-    if isinstance(host, list) and all(isinstance(h, tuple) and len(h) == 2 for h in host):
-        return list(host)
-    return None
-
-
-def _combined_host(hosts: list[Mesh]) -> tuple[Mesh, np.ndarray]:
-    """Several host meshes as one mesh (vertices and faces concatenated) and vertex offsets."""
-    offsets = np.cumsum([0] + [h.n_vertices for h in hosts]).astype(np.int64)
-    V = np.vstack([h.V for h in hosts])
-    F = np.vstack([h.F + o for h, o in zip(hosts, offsets)])
-    return Mesh(V, F, name="host"), offsets
-
-
-def _seam_specs(seams: Any, n_hosts: int, host_list: bool) -> list[tuple[int | None, Any, Any]]:
-    """``(host index or None, host curve spec, guest curve spec)`` per seam, validated."""
-    if isinstance(seams, (str, bytes, Mapping)) or not isinstance(seams, Sequence) or not seams:
-        raise CurveError(
-            "seams must be a non-empty list of (host_curve, guest_curve) or (host_index, "
-            f"host_curve, guest_curve) tuples, got {seams!r:.80}"
-        )
-    out = []
-    for i, item in enumerate(seams):
-        if not isinstance(item, (tuple, list)) or len(item) not in (2, 3):
-            raise CurveError(
-                f"seams[{i}] must be a (host_curve, guest_curve) or (host_index, host_curve, "
-                f"guest_curve) tuple, got {item!r:.80}"
-            )
-        if len(item) == 2:
-            out.append((None, item[0], item[1]))
-            continue
-        index = item[0]
-        if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
-            raise CurveError(
-                f"seams[{i}]: the first of three entries is the host index and must be an "
-                f"integer, got {index!r:.40}; give (host_index, host_curve, guest_curve) or "
-                "(host_curve, guest_curve)"
-            )
-        if not 0 <= int(index) < n_hosts:
-            what = f"there are {n_hosts} host meshes" if host_list else "there is one host mesh"
-            raise CurveError(
-                f"seams[{i}]: host index {int(index)} does not exist; {what} "
-                f"(indices 0..{n_hosts - 1}) — pass host=[mesh0, mesh1, ...] to join several"
-            )
-        out.append((int(index), item[1], item[2]))
-    return out
-
-
-def _check_disjoint(pairs: list[SeamPair]) -> None:
-    """Raise :class:`CurveError` if two seams share a host or a guest vertex."""
-    for side in ("guest", "host"):
-        curves = [getattr(p, f"{side}_curve").indices for p in pairs]
-        owner = np.concatenate([np.full(len(c), i) for i, c in enumerate(curves)])
-        ids = np.concatenate(curves)
-        order = np.argsort(ids, kind="stable")
-        same = np.flatnonzero(ids[order][1:] == ids[order][:-1])
-        if not same.size:
-            continue
-        i, j = sorted({int(owner[order[same[0]]]), int(owner[order[same[0] + 1]])})
-        shared = np.intersect1d(curves[i], curves[j])
-        raise CurveError(
-            f"seams[{i}] and seams[{j}] share {shared.size} {side} vertices "
-            f"({shared[:_SHOWN].tolist()}); each boundary vertex can belong to one seam only — "
-            f"give {side} curves that neither overlap nor touch (different loops, or open "
-            "curves with a gap between them)"
-        )
-
-
-def _combined_correspondence(parts: list[Correspondence], host_sizes: list[int]):
-    """The correspondences of consecutive seams as one (see ``JoinResult.correspondence``)."""
-    if len(parts) == 1:
-        return parts[0]
-    last = parts[-1]
-    parent = parts[0].face_parent
-    for c in parts[1:]:
-        parent = parent[c.face_parent]
-    seam_off = np.cumsum([0] + [len(c.seam) for c in parts[:-1]])
-    host_off = np.cumsum([0] + host_sizes[:-1])
-    return Correspondence(
-        V=last.V,
-        F=last.F,
-        face_parent=parent,
-        n_original=parts[0].n_original,
-        seam=np.concatenate([c.seam for c in parts]),
-        targets=np.vstack([c.targets for c in parts]),
-        seam_t=np.concatenate([c.seam_t for c in parts]),
-        host_hit=np.concatenate([c.host_hit + o for c, o in zip(parts, seam_off)]),
-        host_edge=np.concatenate([c.host_edge + o for c, o in zip(parts, host_off)]),
-        host_edge_t=np.concatenate([c.host_edge_t for c in parts]),
-        inserted_from=np.vstack([c.inserted_from.reshape(-1, 2) for c in parts]),
-        inserted_t=np.concatenate([c.inserted_t for c in parts]),
-    )
-
-
-def _combined_gap(gaps: list[dict], counts: list[int]) -> dict:
-    """Seam gap over several seams: largest maximum, mean over all seam vertices."""
-    if len(gaps) == 1:
-        return gaps[0]
-    w = np.asarray(counts, dtype=np.float64) / float(sum(counts))
-    return {
-        "max": max(g["max"] for g in gaps),
-        "mean": float(sum(wi * g["mean"] for wi, g in zip(w, gaps))),
-        "relative_max": max(g["relative_max"] for g in gaps),
-        "relative_mean": float(sum(wi * g["relative_mean"] for wi, g in zip(w, gaps))),
-    }
-
-
-#: A host with more faces than this is checked near its curves only (see _check_host).
-HOST_CHECK_ALL_FACES = 200_000
-
-# the host neighbourhood reaches at least this many of the longest curve edges beyond the
-# curves (the bands the join measures are a few edges wide)
-_NEAR_EDGES = 10
-
-
-def _given_indices(spec: Any) -> np.ndarray | None:
-    """The vertex indices of a curve given as an index array (or ``Curve(indices=...)``)."""
-    if isinstance(spec, Curve):
-        spec = spec.indices
-    elif isinstance(spec, Mapping):
-        spec = spec.get("indices")
-    elif spec is None or isinstance(spec, (int, np.integer, str, bytes)):
-        return None
-    try:
-        idx = np.asarray(spec)
-    except (TypeError, ValueError):
-        return None
-    if idx.ndim != 1 or idx.size == 0 or not np.issubdtype(idx.dtype, np.integer):
-        return None
-    return idx.astype(np.int64)
-
-
-def _renamed(mesh: Mesh, name: str) -> Mesh:
-    """``Mesh(mesh.V, mesh.F, name=name)`` without copying the (read-only) arrays."""
-    out = copy.copy(mesh)
-    object.__setattr__(out, "name", name)
-    object.__setattr__(out, "vertex_attributes", {})
-    object.__setattr__(out, "face_attributes", {})
-    return out
-
-
-def _host_neighbourhood(host: Mesh, host_curve: Any, seams: Any) -> Mesh | None:
-    """The part of a large single host that the join uses, or ``None`` to use all of it.
-
-    The host is rigid: the join reads it only around its curves (their
-    frames, the crease and dihedral bands, the weld's seam faces and the
-    self-intersection band). For a host of more than
-    :data:`HOST_CHECK_ALL_FACES` faces whose curves are all given by vertex
-    indices this is the mesh of the faces that have a vertex within half a
-    curve diameter (at least :data:`_NEAR_EDGES` curve edges) of the curves'
-    bounding box — a physical neighbourhood that contains every band the
-    join measures (a few edges wide); every vertex inside it keeps all its
-    faces — on the host's own vertex ids. Smaller hosts, and
-    curves selected by loop or start vertex (which need all of the host's
-    boundary), get ``None``.
-    """
-    specs = [host_curve] if seams is None else [
-        item[-2] if isinstance(item, (tuple, list)) and len(item) in (2, 3) else None
-        for item in (seams if isinstance(seams, Sequence) else [])
-    ]
-    curves = [_given_indices(spec) for spec in specs]
-    n = host.n_vertices
-    if (
-        host.n_faces <= HOST_CHECK_ALL_FACES
-        or not curves
-        or any(c is None or c.min() < 0 or c.max() >= n for c in curves)
-        or (seams is not None and any(len(item) == 3 for item in seams))
-    ):
-        return None
-    P = host.V[np.concatenate(curves)]
-    lo, hi = P.min(axis=0), P.max(axis=0)
-    longest = max(float(np.linalg.norm(np.diff(host.V[c], axis=0), axis=1).max(initial=0.0))
-                  for c in curves)
-    pad = max(0.5 * float(np.linalg.norm(hi - lo)), _NEAR_EDGES * longest)
-    near = ((host.V >= lo - pad) & (host.V <= hi + pad)).all(axis=1)
-    F = host.F[near[host.F].any(axis=1)]
-    if not len(F):
-        return None  # curves on no face: the whole-host path reports it
-    return Mesh(host.V, F, name=host.name)
-
-
-def _check_host(host: Mesh, near: Mesh | None) -> None:
-    """``check_surface`` of a single host, on its neighbourhood ``near`` when given.
-
-    Where the neighbourhood fails a check the whole host is checked, so an
-    error always names the right elements and a fan cut at the
-    neighbourhood's rim is never reported. Defects farther away do not
-    enter the join and stay in the host as given.
-    """
-    if near is None:
-        check_surface(host, "host")
-        return
-    try:
-        check_surface(near, "host")
-    except MeshError:
-        check_surface(host, "host")
-
-
-def _select_near(host: Mesh, near: Mesh, spec: Any, name: str) -> SelectedCurve:
-    """A host curve given by indices, selected on the host's neighbourhood ``near``.
-
-    Every curve vertex lies inside the neighbourhood with all its faces, so
-    its boundary edges, their loop order and direction, and whether the
-    curve is a whole loop are the host's; only the loop's number is not
-    (``loop=-1``: the host's loops were not all traced). Where the
-    selection fails, it is repeated on the whole host for the error message.
-    """
-    try:
-        hc = select_curve(near, spec, name=name)
-    except CurveError:
-        return select_curve(host, spec, name=name)
-    return SelectedCurve(hc.indices, hc.closed, -1, hc.forward)
 
 
 def _guest_mesh(guest: Any) -> Mesh:
@@ -483,56 +246,22 @@ class JoinSolver:
             guest_mesh = _guest_mesh(guest)
             overrides = _resolve_stiffness(guest_mesh, options, overrides, stiffness_regions)
         self.options = JoinOptions.make(options, **overrides)
-        hosts = _host_list(host)
-        if hosts is None:
-            self.host = as_mesh(host, "host")
-            if self.host.name == "mesh":
-                self.host = _renamed(self.host, "host")
-            self.hosts = [self.host]
-            self.host_offsets = np.array([0, self.host.n_vertices], dtype=np.int64)
-        else:
-            self.hosts = [as_mesh(h, f"host[{i}]") for i, h in enumerate(hosts)]
-            self.hosts = [
-                Mesh(h.V, h.F, name=f"host[{i}]") if h.name == "mesh" else h
-                for i, h in enumerate(self.hosts)
-            ]
-            self.host, self.host_offsets = _combined_host(self.hosts)
+        # §3: the hosts, and the curves of every seam selected and paired
+        self.hosts, self.host, self.host_offsets, several = seams_.load_hosts(host)
         self.guest = _guest_mesh(guest) if guest_mesh is None else guest_mesh
-        self._host_near = None if hosts is not None else _host_neighbourhood(
-            self.host, host_curve, seams
+        self._host_near = None if several else seams_.host_neighbourhood(
+            self.host, host_curve, seams, HOST_CHECK_ALL_FACES
         )
-        if hosts is None:
-            _check_host(self.host, self._host_near)
-        else:
+        if several:
             for h in self.hosts:
                 check_surface(h, h.name)
-        check_surface(self.guest, "guest")
-        if seams is None:
-            specs = [(None, host_curve, guest_curve)]
-            names = [("host_curve", "guest_curve")]
         else:
-            if host_curve is not None or guest_curve is not None:
-                raise CurveError(
-                    "give either seams=[(host_curve, guest_curve), ...] or host_curve and "
-                    "guest_curve, not both; put the single seam into the seams list"
-                )
-            specs = _seam_specs(seams, len(self.hosts), hosts is not None)
-            names = [
-                (f"seams[{i}] host curve", f"seams[{i}] guest curve") for i in range(len(specs))
-            ]
-        resolved = [self._select(*spec, *name) for spec, name in zip(specs, names)]
-        _check_disjoint(resolved)
-        check_seam_scales(self.host.V, self.guest.V, resolved)
-        paired = pair_seams(
-            self.host.V,
-            [r.host_curve for r in resolved],
-            self.guest.V,
-            [r.guest_curve for r in resolved],
-            guest_starts_given=[bool(r.pairing["start_given"]) for r in resolved],
-        )
-        self.pairs = [
-            SeamPair(r.host_index, hc, gc, info) for r, (hc, gc, info) in zip(resolved, paired)
-        ]
+            seams_.check_host(self.host, self._host_near)
+        check_surface(self.guest, "guest")
+        self.pairs = seams_.select_seams(
+            self.hosts, self.host, self.host_offsets, self._host_near, self.guest,
+            host_curve, guest_curve, seams, several,
+        )  # fmt: skip
         single = len(self.pairs) == 1
         self.host_curve = self.pairs[0].host_curve if single else None
         self.guest_curve = self.pairs[0].guest_curve if single else None
@@ -542,47 +271,16 @@ class JoinSolver:
         self.timings: dict[str, float] = {"select": time.perf_counter() - t0}
         self._prepare()
 
-    def _select(
-        self, index: int | None, hspec: Any, gspec: Any, hname: str, gname: str
-    ) -> SeamPair:
-        """Resolve the curves of one seam (not yet paired; ``pairing`` holds ``start_given``)."""
-        if index is None and self._host_near is not None:
-            hc = _select_near(self.host, self._host_near, hspec, hname)
-            index = 0
-        elif index is None:
-            hc = select_curve(self.host, hspec, name=hname)
-            index = int(np.searchsorted(self.host_offsets, hc.indices[0], side="right") - 1)
-        else:
-            sub = select_curve(self.hosts[index], hspec, name=hname)
-            if len(self.hosts) == 1:
-                hc = sub
-            else:
-                off = int(self.host_offsets[index])
-                hc = select_curve(
-                    self.host, Curve(indices=sub.indices + off, closed=sub.closed), name=hname
-                )
-        g = Curve.coerce(gspec, gname)
-        gc = select_curve(self.guest, g, name=gname)
-        start_given = g.start is not None or g.indices is not None
-        return SeamPair(index, hc, gc, {"start_given": start_given})
-
     # -- set-up -----------------------------------------------------------------------------
 
     def _prepare(self) -> None:
         t0 = time.perf_counter()
         opt = self.options
-        V, F = self.guest.V, self.guest.F
-        parts = []
-        for p in self.pairs:
-            part = correspond(
-                V, F, p.guest_curve, self.host.V, p.host_curve, snap_tolerance=opt.snap_tolerance
-            )
-            V, F = part.V, part.F
-            parts.append(part)
-        self.parts = parts
-        self.corr = _combined_correspondence(parts, [len(p.host_curve.indices) for p in self.pairs])
-        c = self.corr
-        check_guest_reaches_seam(c.F, len(c.V), c.seam)
+        # §4.1: the curves mapped onto each other, host points inserted into the guest
+        parts, c = seams_.correspond_seams(
+            self.guest.V, self.guest.F, self.host.V, self.pairs, opt.snap_fraction
+        )
+        self.parts, self.corr = parts, c
         t1 = time.perf_counter()
         self.host_mean_edges = []
         for p in self.pairs:
@@ -601,7 +299,7 @@ class JoinSolver:
         if opt.stretch_weight > 0:
             k = edge_stiffness(self.E, c.F, *self._stiffness())
             terms.append(StretchTerm(c.V, self.E, opt.stretch_weight * k))
-        self.smooth_tolerances_deg = []
+        self.smooth_keep_degs = []
         self.crease_removed = []
         self._rest_fits = {}  # the rest guest's band fits along its seams (see _result)
         self.bands = [
@@ -622,8 +320,8 @@ class JoinSolver:
                 radius = radius or None
                 frames = seam_frames(self.host.V, self.host.F, hc.indices, hc.closed, radius=radius)
                 at_seam = _interpolate_frames(frames, part.host_edge, part.host_edge_t, hc.closed)
-                tolerance = self._smooth_tolerance(frames, hc)
-                self.smooth_tolerances_deg.append(tolerance)
+                tolerance = self._smooth_keep_deg(frames, hc)
+                self.smooth_keep_degs.append(tolerance)
                 terms.append(
                     SmoothJoinTerm(
                         c.V,
@@ -635,7 +333,7 @@ class JoinSolver:
                         np.radians(tolerance),
                     )
                 )
-        self.smooth_tolerance_deg = max(self.smooth_tolerances_deg, default=0.0)
+        self.smooth_keep_deg = max(self.smooth_keep_degs, default=0.0)
         self.terms = terms
         t2 = time.perf_counter()
         self.solver = LocalGlobalSolver(terms, len(c.V), c.seam, opt.linear_solver)
@@ -692,7 +390,7 @@ class JoinSolver:
         The host's band-fitted tangent planes at the seam targets are tilted by
         the elevation the join keeps (the rest guest's, less the crease coherent
         along the seam), and the guest's band-fitted direction off each seam
-        vertex is pulled into them. ``smooth_tolerance`` widens that into a wedge.
+        vertex is pulled into them. ``smooth_keep_deg`` widens that into a wedge.
         """
         c, opt = self.corr, self.options
         host_fit = self._host_fit(hc, band)
@@ -716,8 +414,8 @@ class JoinSolver:
             join_side=opt.join_side,
         )
         self.crease_removed.append(np.degrees(np.abs(removed)))
-        tolerance = float(opt.smooth_tolerance or 0.0)
-        self.smooth_tolerances_deg.append(tolerance)
+        tolerance = float(opt.smooth_keep_deg or 0.0)
+        self.smooth_keep_degs.append(tolerance)
         return SmoothJoinTerm(
             c.V,
             c.F,
@@ -729,17 +427,17 @@ class JoinSolver:
             fit=guest_fit,
         )
 
-    def _smooth_tolerance(self, smoothed: SeamFrames, hc: SelectedCurve) -> float:
+    def _smooth_keep_deg(self, smoothed: SeamFrames, hc: SelectedCurve) -> float:
         """Crease (degrees) the robust smooth join tolerates: the host's own normal noise.
 
         The median angle between the host's one-ring and smoothed cross-seam
-        directions along the curve ``hc``, unless ``smooth_tolerance`` is given.
+        directions along the curve ``hc``, unless ``smooth_keep_deg`` is given.
         """
         opt = self.options
-        if opt.smooth_mode == "paper" or (opt.smooth_tolerance is None and opt.smooth_radius == 0):
+        if opt.smooth_mode == "paper" or (opt.smooth_keep_deg is None and opt.smooth_radius == 0):
             return 0.0
-        if opt.smooth_tolerance is not None:
-            return float(opt.smooth_tolerance)
+        if opt.smooth_keep_deg is not None:
+            return float(opt.smooth_keep_deg)
         onering = seam_frames(self.host.V, self.host.F, hc.indices, hc.closed)
         cos = np.clip(np.einsum("ij,ij->i", onering.inward, smoothed.inward), -1.0, 1.0)
         return float(np.degrees(np.median(np.arccos(cos))))
@@ -932,7 +630,7 @@ class JoinSolver:
             X0,
             bc,
             max_iterations=opt.max_iterations,
-            tolerance=opt.tolerance,
+            tolerance=opt.energy_tolerance,
             time_limit=opt.time_limit,
             scale=self.guest_mean_edge,
             acceleration=opt.acceleration,
@@ -1088,7 +786,7 @@ class JoinSolver:
             face_normals_areas(X, c.F)[1].sum() / face_normals_areas(c.V, c.F)[1].sum()
         )
         m = {
-            "seam_gap": _combined_gap(gaps, [len(sm.seam) for sm in seams]),
+            "seam_gap": combined_gap(gaps, [len(sm.seam) for sm in seams]),
             "crease_deg": crease.report(measured_all),
             "crease_onering_deg": metrics.summary(np.concatenate(onering_all)),
             "input_crease_deg": crease.report(inputs_all),
@@ -1112,10 +810,8 @@ class JoinSolver:
             host=self.host,
             guest=guest,
             rest_guest=rest,
-            seam=c.seam.copy(),
-            host_curve=host_curve,
+            seams=seams,
             seam_targets=np.array(bc),
-            closed=all(sm.closed for sm in seams),
             area_ratio=ratio,
             converged=run.converged,
             iterations=run.iterations,
@@ -1127,8 +823,6 @@ class JoinSolver:
             crease=seam_creases,
             metrics=m,
             stop_reason=run.reason,
-            pairing=dict(self.pairing),
-            seams=seams,
             host_offsets=self.host_offsets.copy(),
         )
         # weld (kept in the result) and count self-intersections near the seam

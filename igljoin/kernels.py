@@ -8,10 +8,9 @@ do the same work as one loop over vertices or edges each, compiled by numba
 (``cache=True``: compiled once per machine, then loaded from the cache).
 
 They are exact re-statements of the numpy local steps in
-:mod:`igljoin.terms` (which stay as the reference implementation; the tests
-compare both to rounding). Setting the environment variable
-``IGLJOIN_KERNELS=0`` before importing igljoin makes the terms use the numpy
-path instead.
+:mod:`igljoin.terms`, which stay as the reference implementation: a term
+built with ``compiled=False`` runs them, and the tests compare both paths
+to rounding.
 
 Layouts: positions ``X`` (n, 3); edges ``E`` (e, 2) with edge vectors
 ``d_e = X[E[e, 0]] − X[E[e, 1]]``; rotations (n, 3, 3); half-gradients are
@@ -21,13 +20,11 @@ Layouts: positions ``X`` (n, 3); edges ``E`` (e, 2) with edge vectors
 from __future__ import annotations
 
 import math
-import os
 
 import numba as nb
 import numpy as np
 
 __all__ = [
-    "ENABLED",
     "edge_vectors",
     "shape_rotations",
     "shape_residuals",
@@ -37,9 +34,6 @@ __all__ = [
     "lbfgs_first_loop",
     "lbfgs_second_loop",
 ]
-
-#: Whether the terms use these kernels (``IGLJOIN_KERNELS=0`` turns them off).
-ENABLED = os.environ.get("IGLJOIN_KERNELS", "1") != "0"
 
 # Newton on SO(3): same constants as igljoin.rotations (step below which a rotation
 # has settled, steps before the SVD decides, relative margin of the maximum condition)
@@ -67,6 +61,20 @@ def incidence(E: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     ptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(np.bincount(ends, minlength=n), out=ptr[1:])
     return ptr, (order // 2).astype(np.int64)
+
+
+@nb.njit(cache=True, inline="always")
+def _add_opposite(G, i, j, r0, r1, r2):  # pragma: no cover - compiled
+    """Add ``r`` to row ``i`` of ``G`` (n, 3) and subtract it from row ``j``.
+
+    The half-gradient of a residual of the difference ``X[i] − X[j]``.
+    """
+    G[i, 0] += r0
+    G[i, 1] += r1
+    G[i, 2] += r2
+    G[j, 0] -= r0
+    G[j, 1] -= r1
+    G[j, 2] -= r2
 
 
 @nb.njit(cache=True)
@@ -310,12 +318,7 @@ def shape_residuals(LX, d, Lp, Li, Lx, delta, E, rest_edges, mu, w, R, G):  # pr
                 s1 = ri + rj
             else:
                 s2 = ri + rj
-        G[i, 0] += wm * s0
-        G[i, 1] += wm * s1
-        G[i, 2] += wm * s2
-        G[j, 0] -= wm * s0
-        G[j, 1] -= wm * s1
-        G[j, 2] -= wm * s2
+        _add_opposite(G, i, j, wm * s0, wm * s1, wm * s2)
     return w * (energy_lap + mu * energy_edges)
 
 
@@ -358,12 +361,7 @@ def stretch_local(d, E, k, rest_length, rest, R, G):  # pragma: no cover - compi
             r0 *= k[e]
             r1 *= k[e]
             r2 *= k[e]
-        G[i, 0] += r0
-        G[i, 1] += r1
-        G[i, 2] += r2
-        G[j, 0] -= r0
-        G[j, 1] -= r1
-        G[j, 2] -= r2
+        _add_opposite(G, i, j, r0, r1, r2)
     return energy
 
 
@@ -432,12 +430,7 @@ def smooth_local(
         r2 = d2 - t2
         wp = weights[p]
         energy += wp * (r0 * r0 + r1 * r1 + r2 * r2)
-        G[f, 0] += wp * r0
-        G[f, 1] += wp * r1
-        G[f, 2] += wp * r2
-        G[s, 0] -= wp * r0
-        G[s, 1] -= wp * r1
-        G[s, 2] -= wp * r2
+        _add_opposite(G, f, s, wp * r0, wp * r1, wp * r2)
     return energy
 
 

@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
+import sys
+import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .errors import OptionsError
 
-__all__ = ["JoinOptions", "MAX_ITERATIONS", "MAX_WEIGHT"]
+__all__ = ["JoinOptions", "MAX_ITERATIONS", "MAX_WEIGHT", "DEPRECATED", "new_names"]
 
 #: Largest join angle, degrees: at 90° the guest would leave along the host's
 #: normal, where the side it turns to is no longer defined.
@@ -38,6 +43,92 @@ STRUCTURAL = "structural"
 MAX_ITERATIONS = 1_000_000
 
 
+#: Old option names still accepted, each with its new name. Each old name
+#: was ``*tolerance`` in another unit; the new ones say which. They go in the
+#: release after the one that renamed them.
+DEPRECATED = {
+    "tolerance": "energy_tolerance",
+    "snap_tolerance": "snap_fraction",
+    "smooth_tolerance": "smooth_keep_deg",
+}
+
+_HERE = str(Path(__file__).resolve().parent)
+
+
+def _outside_igljoin() -> int:
+    """``stacklevel`` of the first caller outside the igljoin package (for a warning)."""
+    frame, level = sys._getframe(1), 1
+    while frame is not None and str(Path(frame.f_code.co_filename).resolve()).startswith(_HERE):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
+def new_names(options: Mapping, where: str = "") -> dict:
+    """``options`` with every deprecated name replaced by its new name.
+
+    Parameters
+    ----------
+    options : mapping
+        Option names to values, as given by the caller.
+    where : str
+        Prefix of the warning and error messages (e.g. ``"join.toml: [options]"``).
+
+    Returns
+    -------
+    dict
+        The same options under the current names (order kept).
+
+    Warns
+    -----
+    DeprecationWarning
+        For each old name used, naming the new one.
+
+    Raises
+    ------
+    OptionsError
+        If an old name and its new name are both given.
+
+    Examples
+    --------
+    >>> import warnings
+    >>> with warnings.catch_warnings():
+    ...     warnings.simplefilter("ignore")
+    ...     new_names({"tolerance": 1e-6, "smooth": False})
+    {'energy_tolerance': 1e-06, 'smooth': False}
+    """
+    out = dict(options)
+    if not any(old in out for old in DEPRECATED):
+        return out
+    prefix = f"{where} " if where else ""
+    for old, new in DEPRECATED.items():
+        if old not in out:
+            continue
+        if new in out:
+            raise OptionsError(
+                f"{prefix}{old} and {new} are the same option ({old} is its old name); "
+                f"give only {new}"
+            )
+        warnings.warn(
+            f"{prefix}the option {old} is now called {new}; the old name will be removed "
+            "in the next release",
+            DeprecationWarning,
+            stacklevel=_outside_igljoin(),
+        )
+    return {DEPRECATED.get(k, k): v for k, v in out.items()}
+
+
+def _accepts_old_names(cls: type) -> type:
+    """Let the dataclass ``__init__`` of ``cls`` take the :data:`DEPRECATED` names too."""
+    init = cls.__init__
+
+    @functools.wraps(init)
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        init(self, *args, **new_names(kwargs))
+
+    cls.__init__ = __init__
+    return cls
+
+
 def _structural(default: Any) -> Any:
     """A field whose change changes the quadratic form (a new factorization)."""
     return field(default=default, metadata={STRUCTURAL: True})
@@ -54,6 +145,7 @@ def _short(value: Any) -> str:
     return text if len(text) <= 60 else f"{text[:40]}... ({len(text)} characters)"
 
 
+@_accepts_old_names
 @dataclass(frozen=True)
 class JoinOptions:
     """Weights and solver settings of a join.
@@ -104,12 +196,13 @@ class JoinOptions:
         Towards which side of the host surface a positive ``join_angle``
         turns: the side the rest guest lies on (default), the side of the
         host's normal, or the other.
-    smooth_tolerance : float, optional
-        Robust mode: crease in degrees below which a cross-seam edge is left
-        alone. ``None`` (default) is 0 with one-ring tangent planes and, with
-        ``smooth_radius > 0``, the host's own normal noise (median angle
-        between its one-ring and fitted cross-seam directions), so the join
-        does not chase scan noise.
+    smooth_keep_deg : float, optional
+        Robust and band modes: crease in degrees that the join keeps, i.e.
+        below which a cross-seam edge is left alone (formerly
+        ``smooth_tolerance``). ``None`` (default) is 0 with one-ring tangent
+        planes and, with ``smooth_radius > 0``, the host's own normal noise
+        (median angle between its one-ring and fitted cross-seam
+        directions), so the join does not chase scan noise.
     laplacian : {"uniform", "cotangent"}
         Laplacian weights; uniform (``1/|N(p)|``) as in the paper.
     rotation_aware : bool
@@ -125,18 +218,21 @@ class JoinOptions:
     max_iterations : int
         Upper bound on local/global iterations (default 2000, at most
         :data:`MAX_ITERATIONS`, 1,000,000).
-    tolerance : float
-        Converged when the energy fell by less than ``tolerance`` times its
-        value over the last five iterations and the last iteration moved no
-        vertex by more than ``sqrt(tolerance)`` mean edge lengths (or the
-        energy is below ``tolerance²`` of its scale, a minimum of zero
-        energy). The default 1e-7 leaves the energy within about 1e-6
-        (relative) of the minimum the iteration converges to.
+    energy_tolerance : float
+        Relative energy change at which the iteration stops (formerly
+        ``tolerance``): converged when the energy fell by less than
+        ``energy_tolerance`` times its value over the last five iterations
+        and the last iteration moved no vertex by more than
+        ``sqrt(energy_tolerance)`` mean edge lengths (or the energy is below
+        ``energy_tolerance²`` of its scale, a minimum of zero energy). The
+        default 1e-7 leaves the energy within about 1e-6 (relative) of the
+        minimum the iteration converges to.
     time_limit : float, optional
         Seconds after which the solve returns its current, non-converged result.
-    snap_tolerance : float
+    snap_fraction : float
         Host points closer than this fraction of a guest edge to a guest
-        vertex (in arc length) are matched to it instead of being inserted.
+        vertex (in arc length) are matched to it instead of being inserted
+        (formerly ``snap_tolerance``).
     initial_guess : {"extend", "rigid"}
         Start from the rigidly aligned guest with the seam displacement
         smoothly extended (default), or from the rigidly aligned guest alone.
@@ -152,6 +248,12 @@ class JoinOptions:
         ``igljoin[fast]`` extra, several times faster back-substitutions).
         ``"auto"`` (default) uses cholespy when it is installed. Results
         agree to rounding.
+
+    Notes
+    -----
+    The old names ``tolerance``, ``snap_tolerance`` and ``smooth_tolerance``
+    (:data:`DEPRECATED`) are still accepted, with a ``DeprecationWarning``,
+    for one release.
     """
 
     smooth: bool = _structural(True)
@@ -161,7 +263,7 @@ class JoinOptions:
     smooth_mode: str = _structural("band")
     smooth_band: float | None = _structural(None)
     smooth_radius: float = _structural(0.0)
-    smooth_tolerance: float | None = _structural(None)
+    smooth_keep_deg: float | None = _structural(None)
     join_angle: Any = _structural(None)
     join_side: str = _structural("guest")
     laplacian: str = _structural("uniform")
@@ -169,9 +271,9 @@ class JoinOptions:
     stiffness: Any = _structural(None)
     stiffness_on: str = _structural("auto")
     max_iterations: int = _per_solve(2000)
-    tolerance: float = _per_solve(1e-7)
+    energy_tolerance: float = _per_solve(1e-7)
     time_limit: float | None = _per_solve(None)
-    snap_tolerance: float = _structural(0.1)
+    snap_fraction: float = _structural(0.1)
     initial_guess: str = _per_solve("extend")
     acceleration: int = _per_solve(10)
     linear_solver: str = _structural("auto")
@@ -185,21 +287,21 @@ class JoinOptions:
                 "shape_weight and stretch_weight are both 0: nothing holds the guest's shape; "
                 "make at least one positive"
             )
-        self._number("tolerance", low=0.0, strict=True)
-        self._number("snap_tolerance", low=0.0)
-        if self.snap_tolerance >= 0.5:
+        self._number("energy_tolerance", low=0.0, strict=True)
+        self._number("snap_fraction", low=0.0)
+        if self.snap_fraction >= 0.5:
             raise OptionsError(
-                f"snap_tolerance={self.snap_tolerance} must be below 0.5 (a fraction of a guest "
+                f"snap_fraction={self.snap_fraction} must be below 0.5 (a fraction of a guest "
                 "edge); try the default 0.1"
             )
         self._join_angle()
         if self.smooth_band is not None:
             self._number("smooth_band", low=0.0, strict=True)
-        if self.smooth_tolerance is not None:
-            self._number("smooth_tolerance", low=0.0)
-            if self.smooth_tolerance >= 90.0:
+        if self.smooth_keep_deg is not None:
+            self._number("smooth_keep_deg", low=0.0)
+            if self.smooth_keep_deg >= 90.0:
                 raise OptionsError(
-                    f"smooth_tolerance={self.smooth_tolerance} must be below 90 degrees; "
+                    f"smooth_keep_deg={self.smooth_keep_deg} must be below 90 degrees; "
                     "leave it unset for the automatic value"
                 )
         if self.time_limit is not None:
@@ -349,10 +451,12 @@ class JoinOptions:
             {}
             if options is None
             else (
-                dataclasses.asdict(options) if isinstance(options, JoinOptions) else dict(options)
+                dataclasses.asdict(options)
+                if isinstance(options, JoinOptions)
+                else new_names(options)
             )
         )
-        merged = {**base, **overrides}
+        merged = {**base, **new_names(overrides)}
         unknown = sorted(set(merged) - names)
         if unknown:
             raise OptionsError(

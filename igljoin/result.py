@@ -13,12 +13,12 @@ from .atomic import atomic_write_text
 from .correspond import Correspondence
 from .errors import WeldError
 from .io import DEFAULT_OUTPUT_FORMATS, output_formats, write_mesh
+from .measure import SELF_INTERSECTION_RINGS, guest_maps, weld_metrics
 from .mesh import Mesh
-from .metrics import SELF_INTERSECTION_RINGS, ring_band, self_intersections
 from .options import JoinOptions
 from .plain import plain_json
 from .quality import QualityWarning, assess
-from .weld import Welded, weld
+from .weld import SeamRecord, Welded, weld
 
 __all__ = ["JoinResult", "JoinedSeam", "plain_json"]
 
@@ -35,30 +35,28 @@ def _with_quality(mesh: Mesh) -> Mesh:
 
 
 @dataclass(frozen=True, eq=False)
-class JoinedSeam:
+class JoinedSeam(SeamRecord):
     """One seam of a join: a guest curve held on a host curve.
+
+    A :class:`igljoin.weld.SeamRecord` (``host_curve``, ``seam``,
+    ``closed``, ``host_hit``, ``host_edge``, ``host_edge_t``: where the
+    guest seam vertices lie on the host curve) with what the join made and
+    measured of it.
 
     Attributes
     ----------
-    host_index : int
-        Which host mesh the curve is on (0 for a single host mesh).
     host_curve : ndarray of int64, shape (k,)
         Host curve vertices in curve order, as indices into the combined
         host ``JoinResult.host``.
     seam : ndarray of int64, shape (s,)
         Guest seam vertices in curve order (indices into ``JoinResult.guest``).
     closed : bool
+    host_hit, host_edge, host_edge_t : ndarray
+        See :class:`igljoin.weld.SeamRecord`.
+    host_index : int
+        Which host mesh the curve is on (0 for a single host mesh).
     targets : ndarray, shape (s, 3)
         Where each seam vertex was held.
-    host_hit : ndarray of int64, shape (k,)
-        For each host curve vertex, the position in ``seam`` of the guest
-        vertex on it.
-    host_edge : ndarray of int64, shape (s,)
-        For each seam vertex, the segment of ``host_curve`` it lies on
-        (segment ``j`` joins ``host_curve[j]`` and ``host_curve[j + 1]``,
-        wrapping on a closed curve).
-    host_edge_t : ndarray, shape (s,)
-        Position within that segment, in ``[0, 1]``.
     inserted : int
         Guest vertices inserted on this seam.
     crease : ndarray, shape (k,)
@@ -68,22 +66,11 @@ class JoinedSeam:
         :func:`igljoin.correspond.pair_curves`).
     """
 
-    host_index: int
-    host_curve: np.ndarray
-    seam: np.ndarray
-    closed: bool
-    targets: np.ndarray
-    host_hit: np.ndarray
-    host_edge: np.ndarray
-    host_edge_t: np.ndarray
-    inserted: int
-    crease: np.ndarray
+    host_index: int = 0
+    targets: np.ndarray | None = None
+    inserted: int = 0
+    crease: np.ndarray | None = None
     pairing: dict = field(default_factory=dict)
-
-    @property
-    def guest_at_host(self) -> np.ndarray:
-        """Guest vertex lying on each host curve vertex, shape (k,)."""
-        return self.seam[self.host_hit]
 
 
 @dataclass
@@ -168,10 +155,8 @@ class JoinResult:
     host: Mesh
     guest: Mesh
     rest_guest: Mesh
-    seam: np.ndarray
-    host_curve: np.ndarray
+    seams: list
     seam_targets: np.ndarray
-    closed: bool
     area_ratio: np.ndarray
     converged: bool
     iterations: int
@@ -183,11 +168,59 @@ class JoinResult:
     crease: np.ndarray
     metrics: dict = field(default_factory=dict)
     stop_reason: str = ""
-    pairing: dict = field(default_factory=dict)
-    seams: list = field(default_factory=list)
     host_offsets: np.ndarray | None = None
     _merged: Welded | None = field(default=None, init=False, repr=False, compare=False)
     _warnings: tuple | None = field(default=None, init=False, repr=False, compare=False)
+
+    # -- the single-seam view: every seam's values, seam after seam ---------------------------
+
+    @property
+    def seam(self) -> np.ndarray:
+        """Guest seam vertices, every seam's in curve order, seam after seam, shape (s,)."""
+        return np.concatenate([sm.seam for sm in self.seams])
+
+    @property
+    def host_curve(self) -> np.ndarray:
+        """Host curve vertices, every seam's in curve order, seam after seam, shape (k,)."""
+        return np.concatenate([sm.host_curve for sm in self.seams])
+
+    @property
+    def closed(self) -> bool:
+        """Every curve is a loop."""
+        return all(sm.closed for sm in self.seams)
+
+    @property
+    def pairing(self) -> dict:
+        """Rigid-fit residuals of the closed-curve start search (one seam; else empty)."""
+        return dict(self.seams[0].pairing) if len(self.seams) == 1 else {}
+
+    @property
+    def guest_at_host(self) -> np.ndarray:
+        """Guest vertex lying on each host curve vertex, shape (k,)."""
+        return np.concatenate([sm.guest_at_host for sm in self.seams])
+
+    # -- the welded mesh ---------------------------------------------------------------------
+
+    def weld(self, *, check: bool = True) -> Welded:
+        """Host and deformed guest welded afresh (:func:`igljoin.weld.weld` of this result).
+
+        Raises
+        ------
+        WeldError
+            If the two cannot be welded into a clean oriented manifold.
+        """
+        strain, displacement = guest_maps(self.rest_guest.V, self.guest)
+        return weld(
+            self.host.V,
+            self.host.F,
+            self.guest.V,
+            self.guest.F,
+            self.seams,
+            strain=strain,
+            displacement=displacement,
+            area_ratio=self.area_ratio,
+            check=check,
+        )
 
     @property
     def merged(self) -> Welded:
@@ -199,13 +232,8 @@ class JoinResult:
             If the two cannot be welded into a clean oriented manifold.
         """
         if self._merged is None:
-            self._merged = weld(self)
+            self._merged = self.weld()
         return self._merged
-
-    @property
-    def guest_at_host(self) -> np.ndarray:
-        """Guest vertex lying on each host curve vertex, shape (k,)."""
-        return self.seam[self.correspondence.host_hit]
 
     @property
     def warnings(self) -> tuple[QualityWarning, ...]:
@@ -221,70 +249,25 @@ class JoinResult:
     def measure_weld(self, rings: int = SELF_INTERSECTION_RINGS) -> dict:
         """Weld (kept as :attr:`merged`) and count self-intersections near the seam.
 
-        Run by every join. A weld failure is recorded, not raised.
+        Run by every join: :func:`igljoin.measure.weld_metrics` of
+        :attr:`merged` (``rings`` as there), or, when the weld fails,
+        ``{"weld": {"ok": False, "error": message}, "self_intersections":
+        None}`` (recorded, not raised).
 
         Parameters
         ----------
         rings : int
-            Faces of the welded mesh within this many rings of the seam are
-            tested against each other (:func:`igljoin.metrics.ring_band`).
+            Width of the tested band around the seam, in face rings.
 
         Returns
         -------
         dict
-            ``{"weld": {...}, "self_intersections": {...}}``, plain JSON:
-            ``weld`` holds ``ok`` and, when welded, the counts of
-            :meth:`Welded.summary`, otherwise ``error`` (the message);
-            ``self_intersections`` holds ``pairs`` (intersecting face pairs),
-            ``host_guest``, ``guest_guest``, ``host_host`` (the same pairs by
-            the faces' sides), ``faces_tested``, ``rings``, ``per_seam`` (the
-            pairs by the seam nearest to them) and ``centres`` (per seam, the
-            mean centre of those pairs, or None); it is ``None`` when the weld
-            failed.
         """
         try:
             welded = self.merged
         except WeldError as exc:
             return {"weld": {"ok": False, "error": str(exc)}, "self_intersections": None}
-        F = welded.mesh.F
-        band = ring_band(F, welded.seam, rings)
-        pairs = self_intersections(welded.mesh.V, F, band)
-        sides = welded.label[pairs].sum(axis=1)  # 0 host-host, 1 host-guest, 2 guest-guest
-        centres = welded.mesh.V[F[pairs]].mean(axis=(1, 2))  # (p, 3): each pair's centre
-        where = self._nearest_seams(centres)
-        return {
-            "weld": {"ok": True, **welded.summary()},
-            "self_intersections": {
-                "pairs": int(len(pairs)),
-                "host_guest": int((sides == 1).sum()),
-                "guest_guest": int((sides == 2).sum()),
-                "host_host": int((sides == 0).sum()),
-                "faces_tested": int(band.sum()),
-                "rings": int(rings),
-                # where: the pairs by the seam nearest to them, and per seam the mean
-                # centre of its pairs (None without a pair)
-                "per_seam": [int(c) for c in np.bincount(where, minlength=len(self.seams))],
-                "centres": [
-                    centres[where == i].mean(axis=0).tolist() if (where == i).any() else None
-                    for i in range(len(self.seams))
-                ],
-            },
-        }
-
-    def _nearest_seams(self, points: np.ndarray) -> np.ndarray:
-        """Index of the seam whose host curve is nearest to each point (shape (p,))."""
-        if not len(points) or len(self.seams) < 2:
-            return np.zeros(len(points), dtype=np.int64)
-        dist = np.stack(
-            [
-                np.linalg.norm(
-                    points[:, None, :] - self.host.V[sm.host_curve][None, :, :], axis=2
-                ).min(axis=1)
-                for sm in self.seams
-            ],
-            axis=1,
-        )
-        return np.argmin(dist, axis=1)
+        return weld_metrics(welded, self.host.V, [sm.host_curve for sm in self.seams], rings)
 
     def report(self) -> dict:
         """Plain-JSON summary of the join: warnings, counts, timings, convergence, metrics, options.

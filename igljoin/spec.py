@@ -52,7 +52,7 @@ from .clean import (
 )
 from .errors import OptionsError, SpecError
 from .io import SUPPORTED_SUFFIXES
-from .options import JoinOptions
+from .options import JoinOptions, new_names
 from .outputs import file_sha256
 
 if sys.version_info >= (3, 11):
@@ -274,16 +274,28 @@ class CaseSpec:
                 )
         hc = host_curve if isinstance(host_curve, Curve) else _curve(host_curve, where, "host")
         gc = guest_curve if isinstance(guest_curve, Curve) else _curve(guest_curve, where, "guest")
-        opts, stiffness_file, cleanup, resample = parse_options(
-            dict(options or {}), where=where, base=Path.cwd(), folder=None
-        )
-        spec = cls(
+        parsed = parse_options(dict(options or {}), where=where, base=Path.cwd(), folder=None)
+        return cls._checked(
+            where,
+            parsed,
             name=name or Path(guest).stem,
             folder=None,
             host=Path(host),
             guest=Path(guest),
             host_curve=hc,
             guest_curve=gc,
+        )
+
+    @classmethod
+    def _checked(cls, where: str, parsed: tuple, **fields: Any) -> CaseSpec:
+        """A spec of ``fields`` and the parsed ``[options]`` (:func:`parse_options`), checked.
+
+        Checks what needs the whole spec: a resampled guest needs curves that
+        survive resampling.
+        """
+        opts, stiffness_file, cleanup, resample = parsed
+        spec = cls(
+            **fields,
             options=opts,
             stiffness_file=stiffness_file,
             cleanup=cleanup,
@@ -661,6 +673,10 @@ def parse_options(
     """
     if not isinstance(raw, Mapping):
         raise SpecError(f"{where}: [options] must be a table of option = value pairs")
+    try:
+        raw = new_names(raw, f"{where}: [options]")  # old names: a DeprecationWarning
+    except OptionsError as exc:
+        raise SpecError(str(exc)) from None
     valid = _join_option_names() + ("cleanup", "resample")
     _unknown(raw, valid, f"{where}: [options]", "options")
     opts = {k: v for k, v in raw.items() if k not in ("cleanup", "resample")}
@@ -784,25 +800,19 @@ def load_case(folder: str | os.PathLike) -> CaseSpec:
         if "guest" in raw
         else _find_mesh(root, "guest", where)
     )
-    opts, stiffness_file, cleanup, resample = parse_options(
-        raw.get("options", {}), where=where, base=root, folder=root
-    )
-    spec = CaseSpec(
+    parsed = parse_options(raw.get("options", {}), where=where, base=root, folder=root)
+    return CaseSpec._checked(
+        where,
+        parsed,
         name=given.name if given.name not in ("", ".", "..") else root.name,
         folder=root,
         host=host,
         guest=guest,
         host_curve=_curve(raw.get("host_curve"), where, "host"),
         guest_curve=_curve(raw.get("guest_curve"), where, "guest"),
-        options=opts,
-        stiffness_file=stiffness_file,
-        cleanup=cleanup,
-        resample=resample,
         spec_file=spec_file,
         description=description,
     )
-    _check_resample_curve(spec, where)
-    return spec
 
 
 def _is_case(folder: Path) -> bool:

@@ -137,11 +137,13 @@ class Term(ABC):
         return e, KtW @ r
 
 
-def _edge_vectors(state: LocalState, E: np.ndarray, D: sp.csr_matrix) -> np.ndarray:
+def _edge_vectors(
+    state: LocalState, E: np.ndarray, D: sp.csr_matrix, compiled: bool = True
+) -> np.ndarray:
     """``X[E[:, 0]] − X[E[:, 1]]``, shape (e, 3), shared by the terms using the same ``E``."""
     key = ("edges", id(E))
     if key not in state.cache:
-        state.cache[key] = kernels.edge_vectors(state.X, E) if kernels.ENABLED else D @ state.X
+        state.cache[key] = kernels.edge_vectors(state.X, E) if compiled else D @ state.X
     return state.cache[key]
 
 
@@ -221,6 +223,10 @@ class ShapeTerm(Term):
     E : ndarray of int64, shape (e, 2), optional
         The mesh's unique edges (``unique_edges(F)``); pass the array the
         stretch term uses so that both share one ``D X`` per local step.
+    compiled : bool
+        Run the local step by the compiled kernels (:mod:`igljoin.kernels`,
+        default); ``False`` runs the numpy reference path, which the tests
+        compare against.
 
     Notes
     -----
@@ -231,7 +237,9 @@ class ShapeTerm(Term):
 
     name = "shape"
 
-    def __init__(self, V0, F, weight=1.0, laplacian="uniform", rotation_aware=True, E=None):
+    def __init__(
+        self, V0, F, weight=1.0, laplacian="uniform", rotation_aware=True, E=None, compiled=True
+    ):
         n = len(V0)
         self.n = n
         self.E = unique_edges(F) if E is None else np.asarray(E, dtype=np.int64)
@@ -269,7 +277,7 @@ class ShapeTerm(Term):
         self._e0T = np.ascontiguousarray(self.rest_edges.T)
         self._covariance = None
         # arrays of the compiled local step (igljoin.kernels)
-        self.compiled = kernels.ENABLED
+        self.compiled = bool(compiled)
         if self.compiled:
             self._Lp = self.L.indptr.astype(np.int64)
             self._Li = self.L.indices.astype(np.int64)
@@ -396,7 +404,7 @@ class ShapeTerm(Term):
             return self._local_compiled(state)
         LX, _ = self._fit(state)
         Rd, a0, a1 = self._rotated(state)
-        dT = _edge_vectors(state, self.E, self.D).T
+        dT = _edge_vectors(state, self.E, self.D, self.compiled).T
         mu = ROTATION_REGULARISATION
         r = LX.T - Rd
         r0 = dT - a0
@@ -457,6 +465,8 @@ class StretchTerm(Term):
     E : ndarray of int64, shape (e, 2)
     stiffness : ndarray, shape (e,)
         ``k_ij`` (already multiplied by the stretch weight).
+    compiled : bool
+        Compiled local step (default) or the numpy reference path.
     """
 
     name = "stretch"
@@ -466,20 +476,20 @@ class StretchTerm(Term):
     #: samples of the values tried (0.1–0.5; docs/benchmarks.md).
     preconditioner_scale = 0.2
 
-    def __init__(self, V0, E, stiffness):
+    def __init__(self, V0, E, stiffness, compiled=True):
         self.E = E
         self.K = _difference_operator(E, len(V0))
         self.Kt = sp.csr_matrix(self.K.T)
         self.weights = np.asarray(stiffness, dtype=np.float64)
         self.rest = np.ascontiguousarray(self.K @ V0)
         self.rest_length = np.linalg.norm(self.rest, axis=1)
-        self.compiled = kernels.ENABLED
+        self.compiled = bool(compiled)
         if self.compiled:
             self.E = np.ascontiguousarray(E, dtype=np.int64)
 
     def applied(self, state: LocalState) -> np.ndarray:
         """Edge vectors ``D X``, shape (e, 3), shared with the shape term."""
-        return _edge_vectors(state, self.E, self.K)
+        return _edge_vectors(state, self.E, self.K, self.compiled)
 
     def quadratic(self) -> sp.csr_matrix:
         """``Dᵀ diag(k) D``, shape (n, n)."""
@@ -559,6 +569,10 @@ class SmoothJoinTerm(Term):
     active : ndarray of bool, shape (s,), optional
         Band mode: seam vertices the term acts on (default all); the others
         keep a row of weight 0.
+    compiled : bool
+        Robust and paper modes: compiled local step (default) or the numpy
+        reference path. Band mode has only the numpy path (its rows are a
+        sparse fit, one product per step).
     """
 
     name = "smooth"
@@ -574,6 +588,7 @@ class SmoothJoinTerm(Term):
         tolerance=0.0,
         fit=None,
         active=None,
+        compiled=True,
     ):
         n = len(V0)
         self.mode = mode
@@ -608,7 +623,7 @@ class SmoothJoinTerm(Term):
         # the robust target is a projection onto a half-plane (stiff across it only);
         # the paper's is fixed, so its Hessian is Kᵀ W K
         self.preconditioner_scale = 1.0 if mode == "paper" else 0.5
-        self.compiled = kernels.ENABLED
+        self.compiled = bool(compiled)
         if self.compiled:
             self.pairs = np.ascontiguousarray(self.pairs, dtype=np.int64)
             self.normal = np.ascontiguousarray(self.normal, dtype=np.float64)

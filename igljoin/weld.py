@@ -14,8 +14,10 @@ order. Along the seam the two surfaces share vertices:
   vertex that the host adopted, and the guest is where its values
   (strain, displacement) come from.
 
-With several seams (``JoinResult.seams``) every seam is welded this way in
-the same mesh: each seam's host edges are split and its vertices shared.
+With several seams every seam is welded this way in the same mesh: each
+seam's host edges are split and its vertices shared. The inputs are plain
+arrays and one :class:`SeamRecord` per seam; ``JoinResult.merged`` passes
+those of a join.
 
 The result is checked (edge-manifold, vertex-manifold, every interior edge
 used once in each direction, no zero-area face); a failure raises
@@ -24,8 +26,8 @@ used once in each direction, no zero-area face); a failure raises
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import igl
 import numpy as np
@@ -37,10 +39,7 @@ from .mesh import Mesh
 from .polyline import mean_segment
 from .validate import relative_area_floor
 
-if TYPE_CHECKING:
-    from .result import JoinResult
-
-__all__ = ["Welded", "weld", "check_welded", "HOST", "GUEST"]
+__all__ = ["SeamRecord", "Welded", "weld", "check_welded", "HOST", "GUEST"]
 
 #: :attr:`Welded.label` / :attr:`Welded.source` code of the host.
 HOST = 0
@@ -52,6 +51,42 @@ GUEST = 1
 SEAM_TOLERANCE = 1e-6
 
 _SHOWN = 10  # offending vertices listed in an error message
+
+
+@dataclass(frozen=True, eq=False)
+class SeamRecord:
+    """Where the guest seam vertices of one seam lie on its host curve.
+
+    Attributes
+    ----------
+    host_curve : ndarray of int64, shape (k,)
+        Host curve vertices in curve order.
+    seam : ndarray of int64, shape (s,)
+        Guest seam vertices in curve order.
+    closed : bool
+        The curve is a loop.
+    host_hit : ndarray of int64, shape (k,)
+        For each host curve vertex, the position in ``seam`` of the guest
+        vertex on it.
+    host_edge : ndarray of int64, shape (s,)
+        For each seam vertex, the segment of ``host_curve`` it lies on
+        (segment ``j`` joins ``host_curve[j]`` and ``host_curve[j + 1]``,
+        wrapping on a closed curve).
+    host_edge_t : ndarray, shape (s,)
+        Position within that segment, in ``[0, 1]``.
+    """
+
+    host_curve: np.ndarray
+    seam: np.ndarray
+    closed: bool
+    host_hit: np.ndarray
+    host_edge: np.ndarray
+    host_edge_t: np.ndarray
+
+    @property
+    def guest_at_host(self) -> np.ndarray:
+        """Guest vertex lying on each host curve vertex, shape (k,)."""
+        return self.seam[self.host_hit]
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,55 +151,6 @@ class Welded:
         }
 
 
-def _guest_vertex_maps(result: JoinResult) -> tuple[np.ndarray, np.ndarray]:
-    """Per-vertex strain and displacement of the deformed guest, each shape (n_g,)."""
-    attrs = result.guest.vertex_attributes
-    X, F = result.guest.V, result.guest.F
-    rest = result.rest_guest.V
-    if "strain" in attrs:
-        strain = np.asarray(attrs["strain"], dtype=np.float64)
-    else:
-        E = np.asarray(igl.edges(F), dtype=np.int64)
-        strain = metrics.vertex_strain(E, metrics.edge_strain(rest, X, E), len(X))
-    if "displacement" in attrs:
-        disp = np.asarray(attrs["displacement"], dtype=np.float64)
-    else:
-        disp = metrics.nonrigid_displacement(rest, X)
-    return strain, disp
-
-
-def _seam_parts(result: JoinResult) -> list[tuple]:
-    """Per seam ``(host_curve, seam, closed, host_hit, host_edge, host_edge_t)`` of a result.
-
-    From ``result.seams``; a result without them (built by hand) is one seam
-    described by ``host_curve``, ``seam``, ``closed`` and ``correspondence``.
-    """
-    seams = getattr(result, "seams", None)
-    if seams:
-        return [
-            (
-                np.asarray(sm.host_curve, dtype=np.int64),
-                np.asarray(sm.seam, dtype=np.int64),
-                bool(sm.closed),
-                np.asarray(sm.host_hit, dtype=np.int64),
-                sm.host_edge,
-                sm.host_edge_t,
-            )
-            for sm in seams
-        ]
-    c = result.correspondence
-    return [
-        (
-            np.asarray(result.host_curve, dtype=np.int64),
-            np.asarray(result.seam, dtype=np.int64),
-            bool(result.closed),
-            np.asarray(c.host_hit, dtype=np.int64),
-            c.host_edge,
-            c.host_edge_t,
-        )
-    ]
-
-
 def _directed_keys(F: np.ndarray, n: int) -> np.ndarray:
     """Sorted keys ``u * n + v`` of the directed edges ``u -> v`` of faces ``F`` (m, 3) -> (3m,)."""
     FT = np.ascontiguousarray(F.T)  # (3, m)
@@ -179,14 +165,63 @@ def _directed_count(keys: np.ndarray, u: np.ndarray, v: np.ndarray, n: int) -> n
     return np.searchsorted(keys, q, side="right") - np.searchsorted(keys, q, side="left")
 
 
-def weld(result: JoinResult, *, check: bool = True) -> Welded:
+def _records(seams: Sequence[SeamRecord]) -> list[SeamRecord]:
+    """``seams`` as a non-empty list of :class:`SeamRecord`, or a :class:`WeldError`."""
+    if isinstance(seams, SeamRecord):
+        seams = [seams]
+    if not isinstance(seams, Sequence) or not seams or not all(
+        isinstance(sm, SeamRecord) for sm in seams
+    ):
+        raise WeldError(
+            f"weld: seams must be a non-empty list of igljoin.weld.SeamRecord, got "
+            f"{type(seams).__name__}; pass JoinResult.seams, or weld a result with "
+            "JoinResult.weld()"
+        )
+    return list(seams)
+
+
+def _per_element(values, n: int, name: str, element: str) -> np.ndarray | None:
+    """``values`` as a float array of shape (n,), or ``None`` when not given."""
+    if values is None:
+        return None
+    out = np.asarray(values, dtype=np.float64)
+    if out.shape != (n,):
+        raise WeldError(
+            f"weld: {name} has shape {out.shape}; give one value per guest {element} ({n})"
+        )
+    return out
+
+
+def weld(
+    host_V: np.ndarray,
+    host_F: np.ndarray,
+    guest_V: np.ndarray,
+    guest_F: np.ndarray,
+    seams: Sequence[SeamRecord],
+    *,
+    strain: np.ndarray | None = None,
+    displacement: np.ndarray | None = None,
+    area_ratio: np.ndarray | None = None,
+    check: bool = True,
+) -> Welded:
     """Merge host and deformed guest into one mesh in which the seam vertices are shared.
 
     Parameters
     ----------
-    result : JoinResult
-        A join whose seam was held on the host curve (``solve()`` with the
-        default targets).
+    host_V : ndarray, shape (n_h, 3)
+    host_F : ndarray of int, shape (m_h, 3)
+        The rigid host.
+    guest_V : ndarray, shape (n_g, 3)
+    guest_F : ndarray of int, shape (m_g, 3)
+        The deformed guest, its seams held on the host curves.
+    seams : sequence of SeamRecord
+        Where each seam's guest vertices lie on its host curve
+        (``JoinResult.seams``).
+    strain, displacement : ndarray, shape (n_g,), optional
+        Per guest vertex; become vertex attributes of the welded mesh (0 on
+        host vertices).
+    area_ratio : ndarray, shape (m_g,), optional
+        Per guest face; becomes a face attribute (1.0 on host faces).
     check : bool
         Validate the result (see :func:`check_welded`).
 
@@ -197,18 +232,17 @@ def weld(result: JoinResult, *, check: bool = True) -> Welded:
         ``m_h + (s − k) + m_g`` faces: the ``s`` guest seam vertices are
         shared, ``k`` of them with host curve vertices and ``s − k`` with
         vertices inserted into host curve edges (each insertion splits one
-        host triangle in two). ``n_g``, ``m_g`` count the refined guest
-        (``result.guest``). With several seams, ``s`` and ``k`` are the
+        host triangle in two). With several seams, ``s`` and ``k`` are the
         totals over the seams.
 
     Raises
     ------
     WeldError
-        The guest seam is not on the host curve, the guest would have to be
-        flipped for some seams and not for others (open curves on hosts
-        facing different ways), or the merged mesh would be non-manifold,
-        inconsistently oriented or have zero-area faces; the message names
-        the seam vertices involved.
+        The seams are not :class:`SeamRecord` objects, the guest seam is not
+        on the host curve, the guest would have to be flipped for some seams
+        and not for others (open curves on hosts facing different ways), or
+        the merged mesh would be non-manifold, inconsistently oriented or
+        have zero-area faces; the message names the seam vertices involved.
 
     Examples
     --------
@@ -216,37 +250,38 @@ def weld(result: JoinResult, *, check: bool = True) -> Welded:
     >>> from igljoin.weld import weld
     >>> s = igljoin.phantoms.paper_sample("end_to_end", "equal", resolution=0.4)
     >>> res = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve)
-    >>> w = weld(res)  # the same as res.merged
+    >>> w = weld(res.host.V, res.host.F, res.guest.V, res.guest.F, res.seams)
     >>> w.mesh.n_vertices == s.host.n_vertices + res.guest.n_vertices - len(res.host_curve)
     True
     """
-    c = getattr(result, "correspondence", None)
-    if c is None or not hasattr(result, "host_curve"):
-        raise WeldError(
-            f"weld: expected an igljoin.JoinResult, got {type(result).__name__}; pass the "
-            "result of igljoin.join(...) or JoinSolver.solve()"
-        )
-    Vh, Fh = result.host.V, result.host.F
-    X, Fg = result.guest.V, result.guest.F
+    records = _records(seams)
+    Vh = np.asarray(host_V, dtype=np.float64)
+    Fh = np.asarray(host_F, dtype=np.int64)
+    X = np.asarray(guest_V, dtype=np.float64)
+    Fg = np.asarray(guest_F, dtype=np.int64)
     nh, ng = len(Vh), len(X)
-    parts = _seam_parts(result)
-    several = len(parts) > 1
+    strain = _per_element(strain, ng, "strain", "vertex")
+    displacement = _per_element(displacement, ng, "displacement", "vertex")
+    area_ratio = _per_element(area_ratio, len(Fg), "area_ratio", "face")
+    several = len(records) > 1
 
     # where each seam vertex lies on its host curve: on a host vertex (hit) or inside an edge
     hit_guest, hit_host = [], []
     split_guest, split_a, split_b, split_t, split_P = [], [], [], [], []
-    for i, (hc, seam, closed, host_hit, host_edge, host_edge_t) in enumerate(parts):
+    for i, sm in enumerate(records):
+        hc = np.asarray(sm.host_curve, dtype=np.int64)
+        seam = np.asarray(sm.seam, dtype=np.int64)
         k, s = len(hc), len(seam)
         at_vertex = np.full(s, -1, dtype=np.int64)
-        at_vertex[host_hit] = np.arange(k)
+        at_vertex[np.asarray(sm.host_hit, dtype=np.int64)] = np.arange(k)
         split = np.flatnonzero(at_vertex < 0)
         hit = np.flatnonzero(at_vertex >= 0)
-        e = np.asarray(host_edge, dtype=np.int64)
-        t = np.asarray(host_edge_t, dtype=np.float64)
+        e = np.asarray(sm.host_edge, dtype=np.int64)
+        t = np.asarray(sm.host_edge_t, dtype=np.float64)
         a, b = hc[e], hc[(e + 1) % k]
         P = Vh[a] * (1.0 - t)[:, None] + Vh[b] * t[:, None]
         P[hit] = Vh[hc[at_vertex[hit]]]
-        scale = mean_segment(Vh[hc], closed)
+        scale = mean_segment(Vh[hc], bool(sm.closed))
         gap = np.linalg.norm(X[seam] - P, axis=1)
         off = np.flatnonzero(gap > SEAM_TOLERANCE * scale)
         if off.size:
@@ -297,14 +332,14 @@ def weld(result: JoinResult, *, check: bool = True) -> Welded:
     # orientation: the two sides must use each seam edge in opposite directions; only
     # faces with a seam vertex can hold a seam edge
     n = len(V)
-    mseams = [g2m[seam] for _, seam, *_ in parts]
+    mseams = [g2m[np.asarray(sm.seam, dtype=np.int64)] for sm in records]
     all_seam = np.concatenate(mseams)
     host_keys = _directed_keys(Fh2[metrics.ring_band(Fh2, all_seam, 1)], n)
     guest_keys = _directed_keys(Fg2[metrics.ring_band(Fg2, all_seam, 1)], n)
     same, opposite = [], []
-    for i, (mseam, (_, _, closed, *_)) in enumerate(zip(mseams, parts)):
-        u = mseam if closed else mseam[:-1]
-        v = np.roll(mseam, -1) if closed else mseam[1:]
+    for i, (mseam, sm) in enumerate(zip(mseams, records)):
+        u = mseam if sm.closed else mseam[:-1]
+        v = np.roll(mseam, -1) if sm.closed else mseam[1:]
         host_dir = np.sign(
             _directed_count(host_keys, u, v, n).sum() - _directed_count(host_keys, v, u, n).sum()
         )
@@ -336,28 +371,20 @@ def weld(result: JoinResult, *, check: bool = True) -> Welded:
     seam_flag[mseam] = True
 
     # per-vertex maps: 0 on the rigid host, the guest's values on the shared seam
-    strain, disp = _guest_vertex_maps(result)
-    v_strain = np.zeros(n)
-    v_disp = np.zeros(n)
-    v_strain[g2m] = strain
-    v_disp[g2m] = disp
-    ratio = np.concatenate([np.ones(mh), np.asarray(result.area_ratio, dtype=np.float64)])
+    vertex_attributes = {"seam": seam_flag, "source": source[:, 0], "source_id": source[:, 1]}
+    for name, values in (("strain", strain), ("displacement", displacement)):
+        if values is not None:
+            merged = np.zeros(n)
+            merged[g2m] = values
+            vertex_attributes[name] = merged
+    face_attributes = {
+        "label": label,
+        "source_face": np.concatenate([parent, np.arange(mg, dtype=np.int64)]),
+    }
+    if area_ratio is not None:
+        face_attributes["area_ratio"] = np.concatenate([np.ones(mh), area_ratio])
     mesh = Mesh(
-        V,
-        F,
-        vertex_attributes={
-            "seam": seam_flag,
-            "source": source[:, 0],
-            "source_id": source[:, 1],
-            "strain": v_strain,
-            "displacement": v_disp,
-        },
-        face_attributes={
-            "label": label,
-            "source_face": np.concatenate([parent, np.arange(mg, dtype=np.int64)]),
-            "area_ratio": ratio,
-        },
-        name="welded",
+        V, F, vertex_attributes=vertex_attributes, face_attributes=face_attributes, name="welded"
     )
     welded = Welded(
         mesh=mesh,
@@ -471,5 +498,5 @@ def check_welded(welded: Welded, *, full: bool = False) -> None:
         raise WeldError(
             f"weld: {flat.size} faces have zero area {_offenders(welded, checked[flat])}; a guest "
             "seam vertex coincides with a host vertex it was not matched to — raise "
-            "snap_tolerance or refine the guest near the seam"
+            "snap_fraction or refine the guest near the seam"
         )

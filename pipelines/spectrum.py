@@ -89,7 +89,7 @@ def main(argv=None) -> dict:
     sample = phantoms.paper_sample("end_to_end", "equal", resolution=args.resolution)
     solver = igljoin.JoinSolver(sample.host, sample.guest, sample.host_curve, sample.guest_curve)
     default_iterations = int(solver.solve().iterations)
-    minimum = solver.solve(tolerance=1e-12, max_iterations=5000)
+    minimum = solver.solve(energy_tolerance=1e-12, max_iterations=5000)
     H = free_hessian(solver, minimum.guest.V)
     ls = solver.solver
     free = ls.free

@@ -41,7 +41,7 @@ def patch():
 @pytest.fixture(scope="module")
 def slow_cases(tmp_path_factory, patch) -> Path:
     root = tmp_path_factory.mktemp("slow")
-    toml = "[host_curve]\nloop = 0\n[options]\ntolerance = 1e-300\nmax_iterations = {}\n"
+    toml = "[host_curve]\nloop = 0\n[options]\nenergy_tolerance = 1e-300\nmax_iterations = {}\n"
     for k in range(SLOW):
         _write_case(root, f"case{k}", patch, toml.format(1500 + k))  # each case its own result
     return root

@@ -166,6 +166,19 @@ def test_join_files(patch_files, tmp_path):
     assert report["spec"]["host_curve"] == {"start": 0}
 
 
+def test_join_takes_an_old_option_name_with_a_warning(patch_files, tmp_path):
+    host, guest = patch_files
+    flags = "--host-loop 0 -O tolerance=1e-3 -O max_iterations=5"
+    with pytest.warns(DeprecationWarning, match="tolerance is now called energy_tolerance"):
+        proc = run("join", host, guest, "-o", tmp_path / "old", *flags.split())
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads((tmp_path / "old" / "report.json").read_text())
+    assert report["options"]["energy_tolerance"] == 1e-3 and "tolerance" not in report["options"]
+    both = flags + " -O energy_tolerance=1e-3"
+    proc = run("join", host, guest, "-o", tmp_path / "both", *both.split())
+    assert_one_line_error(proc, 2, "tolerance and energy_tolerance are the same option")
+
+
 def test_join_status_line_draws_and_erases(patch_files):
     import io
 
@@ -227,7 +240,7 @@ def test_join_status_line_on_a_terminal(tmp_path):
     igljoin.write_mesh(tmp_path / "host.ply", s.host)
     igljoin.write_mesh(tmp_path / "guest.ply", s.guest)
     # the plain iteration to a tolerance it cannot reach: 3,000 iterations, over a second
-    flags = "-O acceleration=0 -O tolerance=1e-14 -O max_iterations=3000"
+    flags = "-O acceleration=0 -O energy_tolerance=1e-14 -O max_iterations=3000"
     proc, drawn = _run_on_a_terminal(
         "join", tmp_path / "host.ply", tmp_path / "guest.ply", "-o", tmp_path / "out",
         "--host-start", "0", "--guest-loop", "0", *flags.split(),

@@ -162,7 +162,7 @@ CASES = {
 @pytest.fixture(scope="module", params=list(CASES))
 def case(request):
     Vg, Fg, G, Vh, H, tol = CASES[request.param]()
-    c = correspond(Vg, Fg, G, Vh, H, snap_tolerance=tol)
+    c = correspond(Vg, Fg, G, Vh, H, snap_fraction=tol)
     return Vg, Fg, G, Vh, H, c
 
 
@@ -448,7 +448,7 @@ def test_refined_guest_is_edge_manifold_and_oriented(case):
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_open_curve_maps_start_to_start_and_end_to_end(seed):
     Vg, Fg, G, Vh, H, tol = _open_case(seed, 0.1)
-    c = correspond(Vg, Fg, G, Vh, H, snap_tolerance=tol)
+    c = correspond(Vg, Fg, G, Vh, H, snap_fraction=tol)
     assert c.seam[0] == G.indices[0] and c.seam[-1] == G.indices[-1]
     np.testing.assert_array_equal(c.targets[0], Vh[H.indices[0]])
     np.testing.assert_array_equal(c.targets[-1], Vh[H.indices[-1]])
@@ -456,17 +456,17 @@ def test_open_curve_maps_start_to_start_and_end_to_end(seed):
     assert (c.host_edge[-1], c.host_edge_t[-1]) == (len(H.indices) - 2, 1.0)
 
 
-def test_snap_tolerance_decides_between_snap_and_insert():
+def test_snap_fraction_decides_between_snap_and_insert():
     # guest row at x = 0, 0.5, 1 and host row at x = 0, 0.52, 1: host vertex 1 is 0.04 of a
     # guest edge away from guest vertex 1
     host = strip(np.array([0.0, 0.52, 1.0]), 0.0, -1.0)
     guest = strip(np.array([0.0, 0.5, 1.0]), 1.0, 0.0)
     hc = select_curve(host, {"start": 0, "end": 2})
     gc = select_curve(guest, {"start": 3, "end": 5})
-    snapped = correspond(guest.V, guest.F, gc, host.V, hc, snap_tolerance=0.1)
+    snapped = correspond(guest.V, guest.F, gc, host.V, hc, snap_fraction=0.1)
     assert len(snapped.V) == 6 and snapped.seam.tolist() == [3, 4, 5]
     np.testing.assert_array_equal(snapped.targets, host.V[[0, 1, 2]])
-    inserted = correspond(guest.V, guest.F, gc, host.V, hc, snap_tolerance=0.03)
+    inserted = correspond(guest.V, guest.F, gc, host.V, hc, snap_fraction=0.03)
     assert inserted.seam.tolist() == [3, 4, 6, 5]
     assert inserted.inserted_from.tolist() == [[4, 5]]
     # 0.52 is 0.04 of the way from 0.5 to 1 (rounding of 0.02 / 0.5)
@@ -484,14 +484,14 @@ def test_host_vertex_snaps_to_the_nearer_guest_vertex():
     guest = strip(np.array([0.0, 1.0, 2.0, 3.0]), 1.0, 0.0)
     hc = select_curve(host, {"start": 0, "end": 2})
     gc = select_curve(guest, {"start": 4, "end": 7})
-    c = correspond(guest.V, guest.F, gc, host.V, hc, snap_tolerance=0.46)
+    c = correspond(guest.V, guest.F, gc, host.V, hc, snap_fraction=0.46)
     assert len(c.V) == 8  # no insertion
     assert c.seam.tolist() == [4, 5, 6, 7]
     assert c.host_hit.tolist() == [0, 2, 3]
     np.testing.assert_array_equal(c.targets[2], host.V[1])
     # guest vertex 5 (t = 1/3) goes to the host point at x = 1 (rounding of 1/3 * 3)
     np.testing.assert_allclose(c.targets[1], [1.0, 0.0, 0.0], rtol=0, atol=1e-15)
-    c = correspond(guest.V, guest.F, gc, host.V, hc, snap_tolerance=0.44)
+    c = correspond(guest.V, guest.F, gc, host.V, hc, snap_fraction=0.44)
     assert c.seam.tolist() == [4, 5, 8, 6, 7]
 
 

@@ -90,7 +90,7 @@ options = st.fixed_dictionaries(
         "rotation_aware": st.booleans(),
         "max_iterations": st.integers(1, 60),
         "acceleration": st.integers(0, 8),
-        "snap_tolerance": st.floats(0.0, 0.49),
+        "snap_fraction": st.floats(0.0, 0.49),
     },
 )
 
@@ -148,13 +148,13 @@ def test_random_corrupt_meshes_only_raise_documented_errors(V, F, curve):
                 "shape_weight",
                 "stretch_weight",
                 "smooth_weight",
-                "tolerance",
+                "energy_tolerance",
                 "max_iterations",
-                "snap_tolerance",
+                "snap_fraction",
                 "smooth_radius",
                 "acceleration",
                 "time_limit",
-                "smooth_tolerance",
+                "smooth_keep_deg",
                 "smooth",
             ]
         ),
@@ -215,7 +215,7 @@ def test_random_joins_weld_cleanly():
             outcomes["join refused"] += 1
             return
         try:
-            welded = igljoin.weld(res)
+            welded = res.weld()
         except igljoin.WeldError:  # a documented refusal (zero-area or 3-face seam edges)
             outcomes["weld refused"] += 1
             return
@@ -352,7 +352,7 @@ def test_random_spec_values_only_raise_spec_errors(entries):
                 "laplacian",
                 "acceleration",
                 "stiffness",
-                "tolerance",
+                "energy_tolerance",
             ]
         ),
         st.one_of(

@@ -127,7 +127,7 @@ def test_rigid_motion_of_both_moves_the_result_the_same_way():
     t = np.array([12.0, -30.0, 7.0])
     host2 = igljoin.Mesh(_rigid(s.host.V, R, t), s.host.F)
     guest2 = igljoin.Mesh(_rigid(s.guest.V, R, t), s.guest.F)
-    opts = dict(tolerance=1e-9, max_iterations=2000)
+    opts = dict(energy_tolerance=1e-9, max_iterations=2000)
     a = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve, **opts)
     b = igljoin.join(host2, guest2, s.host_curve, s.guest_curve, **opts)
     size = float(np.linalg.norm(np.ptp(s.guest.V, axis=0)))
@@ -142,7 +142,7 @@ def test_guest_placement_does_not_matter():
     s = phantoms.paper_sample("end_to_end", "equal", resolution=0.5)
     R = Rotation.from_rotvec([1.0, 0.5, -0.2]).as_matrix()
     moved = igljoin.Mesh(_rigid(s.guest.V, R, [5.0, 2.0, -8.0]), s.guest.F)
-    opts = dict(tolerance=1e-9, max_iterations=2000)
+    opts = dict(energy_tolerance=1e-9, max_iterations=2000)
     a = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve, **opts)
     b = igljoin.join(s.host, moved, s.host_curve, s.guest_curve, **opts)
     size = float(np.linalg.norm(np.ptp(s.guest.V, axis=0)))
@@ -215,7 +215,7 @@ def test_solver_reuses_its_factorization():
     s = phantoms.paper_sample("partial_patch", "equal", resolution=0.5)
     solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
     first = solver.solve()
-    again = solver.solve(max_iterations=5, tolerance=1e-3)
+    again = solver.solve(max_iterations=5, energy_tolerance=1e-3)
     moved = solver.solve(targets=first.seam_targets + [0.0, 0.0, 0.5])
     assert solver.factorizations == 1
     assert again.iterations <= 5

@@ -2,11 +2,6 @@
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -15,8 +10,6 @@ import igljoin
 from igljoin import kernels, phantoms
 from igljoin.rotations import fit_rotations_igl
 from igljoin.terms import LocalState, ShapeTerm, SmoothJoinTerm, StretchTerm
-
-pytestmark = pytest.mark.skipif(not kernels.ENABLED, reason="IGLJOIN_KERNELS=0")
 
 
 @pytest.fixture(scope="module")
@@ -121,7 +114,7 @@ def test_stretch_kernel_equals_numpy_with_a_collapsed_edge(tube):
     [
         {"smooth_mode": "robust"},
         {"smooth_mode": "paper"},
-        {"smooth_mode": "robust", "smooth_tolerance": 5.0},
+        {"smooth_mode": "robust", "smooth_keep_deg": 5.0},
     ],
     ids=["robust", "paper", "wedge"],
 )
@@ -137,28 +130,31 @@ def test_smooth_kernel_equals_numpy(tube, options):
 
 
 def test_numpy_path_gives_the_same_join(tube):
-    """``IGLJOIN_KERNELS=0`` switches the kernels off; the join is the same."""
-    code = (
-        "import json, igljoin; from igljoin import kernels, phantoms\n"
-        "s = phantoms.paper_sample('end_to_end', 'longer', resolution=0.5)\n"
-        "r = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve)\n"
-        "print(json.dumps([kernels.ENABLED, r.iterations, r.energy[-1], r.guest.V.tolist()]))\n"
-    )
-    env = dict(os.environ, IGLJOIN_KERNELS="0")
-    out = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
-    )
-    enabled, iterations, energy, V = json.loads(out.stdout)
+    """Terms switched to their numpy reference path (``compiled=False``) give the same join."""
+    reference = _solver(tube)
+    for term in reference.terms:
+        term.compiled = False
+    ref = reference.solve()
     res = igljoin.join(tube.host, tube.guest, tube.host_curve, tube.guest_curve)
-    assert enabled is False
+    assert all(isinstance(t, ShapeTerm | StretchTerm | SmoothJoinTerm) for t in reference.terms)
+    assert not any(t.compiled for t in reference.terms)
     # both paths compute the same numbers up to summation order (~1e-13 relative per
     # step); over a converging run that can shift the stopping iteration by a few
-    assert abs(iterations - res.iterations) <= 3
+    assert abs(ref.iterations - res.iterations) <= 3
     # and they stop at the same minimum: within the convergence tolerance (1e-7)
-    assert energy == pytest.approx(res.energy[-1], rel=1e-6)
+    assert ref.energy[-1] == pytest.approx(res.energy[-1], rel=1e-6)
     size = float(np.linalg.norm(np.ptp(tube.guest.V, axis=0)))
     # soft modes allow position differences of order sqrt(1e-7) of the size
-    assert np.abs(np.asarray(V) - res.guest.V).max() <= 1e-3 * size
+    assert np.abs(ref.guest.V - res.guest.V).max() <= 1e-3 * size
+
+
+def test_terms_are_compiled_by_default_and_on_request(tube):
+    solver = _solver(tube, smooth_mode="robust")
+    assert [t.compiled for t in solver.terms] == [True, True, True]
+    c = solver.corr
+    shape = ShapeTerm(c.V, c.F, compiled=False)
+    stretch = StretchTerm(c.V, shape.E, np.ones(len(shape.E)), compiled=False)
+    assert not shape.compiled and not stretch.compiled
 
 
 def test_incidence_lists_each_edge_at_both_ends():

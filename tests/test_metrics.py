@@ -187,7 +187,7 @@ def flat_rejoin():
     cut = cut_piece(grid, center_vertex=10 * 21 + 10, radius=3.2)
     assert cut is not None
     moved = igljoin.Mesh(_rigid(cut.piece.V), cut.piece.F)
-    res = igljoin.join(cut.host, moved, cut.host_curve, None, tolerance=1e-10)
+    res = igljoin.join(cut.host, moved, cut.host_curve, None, energy_tolerance=1e-10)
     return cut, res
 
 

@@ -5,12 +5,13 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import warnings
 
 import numpy as np
 import pytest
 
 from igljoin.errors import IgljoinError, OptionsError
-from igljoin.options import JoinOptions
+from igljoin.options import DEPRECATED, JoinOptions
 
 NAMES = sorted(f.name for f in dataclasses.fields(JoinOptions))
 
@@ -31,14 +32,14 @@ def test_defaults_are_valid():
 
 def test_options_are_frozen():
     with pytest.raises(dataclasses.FrozenInstanceError):
-        JoinOptions().tolerance = 1.0
+        JoinOptions().energy_tolerance = 1.0
 
 
 def test_numbers_are_stored_as_float():
-    opt = JoinOptions(shape_weight=2, smooth_weight=np.float32(0.5), tolerance=np.int64(1))
+    opt = JoinOptions(shape_weight=2, smooth_weight=np.float32(0.5), energy_tolerance=np.int64(1))
     assert type(opt.shape_weight) is float and opt.shape_weight == 2.0
     assert type(opt.smooth_weight) is float and opt.smooth_weight == 0.5
-    assert type(opt.tolerance) is float and opt.tolerance == 1.0
+    assert type(opt.energy_tolerance) is float and opt.energy_tolerance == 1.0
 
 
 @pytest.mark.parametrize(
@@ -53,27 +54,27 @@ def test_numbers_are_stored_as_float():
         ("stretch_weight", "1"),
         ("shape_weight", True),
         ("shape_weight", None),
-        ("tolerance", 0.0),
-        ("tolerance", -1e-5),
-        ("tolerance", math.nan),
-        ("tolerance", math.inf),
+        ("energy_tolerance", 0.0),
+        ("energy_tolerance", -1e-5),
+        ("energy_tolerance", math.nan),
+        ("energy_tolerance", math.inf),
         ("max_iterations", 0),
         ("max_iterations", -3),
         ("max_iterations", 1.5),
         ("max_iterations", 10.0),
         ("max_iterations", True),
-        ("snap_tolerance", 0.5),
-        ("snap_tolerance", 0.7),
-        ("snap_tolerance", -0.1),
-        ("snap_tolerance", math.nan),
+        ("snap_fraction", 0.5),
+        ("snap_fraction", 0.7),
+        ("snap_fraction", -0.1),
+        ("snap_fraction", math.nan),
         ("acceleration", -1),
         ("acceleration", 51),
         ("acceleration", 2.0),
         ("acceleration", True),
-        ("smooth_tolerance", 90.0),
-        ("smooth_tolerance", 120),
-        ("smooth_tolerance", -1.0),
-        ("smooth_tolerance", math.nan),
+        ("smooth_keep_deg", 90.0),
+        ("smooth_keep_deg", 120),
+        ("smooth_keep_deg", -1.0),
+        ("smooth_keep_deg", math.nan),
         ("time_limit", 0.0),
         ("time_limit", -1.0),
         ("time_limit", math.nan),
@@ -89,14 +90,14 @@ def test_number_out_of_range(name, value):
     [
         ("shape_weight", 0.0),
         ("smooth_weight", 0.0),
-        ("snap_tolerance", 0.0),
-        ("snap_tolerance", 0.49),
+        ("snap_fraction", 0.0),
+        ("snap_fraction", 0.49),
         ("acceleration", 0),
         ("acceleration", 50),
         ("max_iterations", 1),
         ("max_iterations", np.int64(3)),
-        ("smooth_tolerance", 0.0),
-        ("smooth_tolerance", 89.9),
+        ("smooth_keep_deg", 0.0),
+        ("smooth_keep_deg", 89.9),
         ("time_limit", 0.5),
         ("smooth", np.bool_(False)),
     ],
@@ -168,10 +169,10 @@ def test_stiffness_is_stored_as_float_array():
 
 def test_make_from_none_dict_and_instance():
     assert JoinOptions.make() == JoinOptions()
-    assert JoinOptions.make({"tolerance": 1e-3}).tolerance == 1e-3
-    base = JoinOptions(tolerance=1e-3, smooth=False)
+    assert JoinOptions.make({"energy_tolerance": 1e-3}).energy_tolerance == 1e-3
+    base = JoinOptions(energy_tolerance=1e-3, smooth=False)
     opt = JoinOptions.make(base, max_iterations=7)
-    assert (opt.tolerance, opt.smooth, opt.max_iterations) == (1e-3, False, 7)
+    assert (opt.energy_tolerance, opt.smooth, opt.max_iterations) == (1e-3, False, 7)
     # keyword overrides win over the mapping
     assert JoinOptions.make({"max_iterations": 3}, max_iterations=4).max_iterations == 4
 
@@ -191,12 +192,12 @@ def test_make_validates():
 
 def test_replace_validates_and_keeps_the_rest():
     opt = JoinOptions(smooth=False, stiffness=[1.0, 3.0])
-    new = opt.replace(tolerance=1e-3)
-    assert new.tolerance == 1e-3 and new.smooth is False
+    new = opt.replace(energy_tolerance=1e-3)
+    assert new.energy_tolerance == 1e-3 and new.smooth is False
     np.testing.assert_array_equal(new.stiffness, [1.0, 3.0])
-    assert opt.tolerance == JoinOptions().tolerance  # the original is unchanged
-    with pytest.raises(OptionsError, match="^tolerance="):
-        opt.replace(tolerance=-1.0)
+    assert opt.energy_tolerance == JoinOptions().energy_tolerance  # the original is unchanged
+    with pytest.raises(OptionsError, match="^energy_tolerance="):
+        opt.replace(energy_tolerance=-1.0)
     with pytest.raises(OptionsError, match="unknown join options"):
         opt.replace(tol=1.0)
 
@@ -235,15 +236,15 @@ _CHANGED = {
     "join_angle": 20.0,
     "join_side": "normal",
     "smooth_radius": 2.0,
-    "smooth_tolerance": 5.0,
+    "smooth_keep_deg": 5.0,
     "laplacian": "cotangent",
     "rotation_aware": False,
     "stiffness": "twice",  # filled in with the guest's size below
     "stiffness_on": "vertex",
     "max_iterations": 9,
-    "tolerance": 1e-3,
+    "energy_tolerance": 1e-3,
     "time_limit": 1e6,
-    "snap_tolerance": 0.3,
+    "snap_fraction": 0.3,
     "initial_guess": "rigid",
     "acceleration": 0,
     "linear_solver": "igl",
@@ -287,9 +288,9 @@ def test_update_refactors_exactly_for_structural_options_and_skipping_it_is_safe
 
 
 def test_make_does_not_validate_an_instance_again():
-    opt = JoinOptions(tolerance=1e-3)
+    opt = JoinOptions(energy_tolerance=1e-3)
     assert JoinOptions.make(opt) is opt  # frozen and validated when built
-    assert JoinOptions.make(opt, tolerance=1e-4) is not opt
+    assert JoinOptions.make(opt, energy_tolerance=1e-4) is not opt
 
 
 @pytest.mark.parametrize("bad", [-1.0, 90.0, float("nan"), "45", True, [30.0, "a"], []])
@@ -307,3 +308,60 @@ def test_join_angle_per_seam_must_match_the_seams():
         JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve, join_angle=[10.0, 20.0])
     with pytest.raises(OptionsError, match="join_side"):
         JoinOptions(join_side="up")
+
+
+# ------------------------------------------------------------------- renamed options
+
+
+_RENAMED = [
+    ("tolerance", "energy_tolerance", 1e-3),
+    ("snap_tolerance", "snap_fraction", 0.3),
+    ("smooth_tolerance", "smooth_keep_deg", 5.0),
+]
+
+
+@pytest.mark.parametrize(("old", "new", "value"), _RENAMED)
+def test_old_option_names_still_work_and_warn(old, new, value):
+    assert DEPRECATED[old] == new
+    with pytest.warns(DeprecationWarning, match=f"{old} is now called {new}") as caught:
+        opt = JoinOptions(**{old: value})
+    assert getattr(opt, new) == value
+    # the warning points at the caller's line, not into igljoin
+    assert [w.filename for w in caught] == [__file__]
+    with pytest.warns(DeprecationWarning, match=new):
+        assert getattr(JoinOptions.make({old: value}), new) == value
+    with pytest.warns(DeprecationWarning, match=new):
+        assert getattr(JoinOptions().replace(**{old: value}), new) == value
+
+
+@pytest.mark.parametrize(("old", "new", "value"), _RENAMED)
+def test_new_option_names_do_not_warn(old, new, value):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert getattr(JoinOptions(**{new: value}), new) == value
+        assert getattr(JoinOptions.make({new: value}), new) == value
+    assert new in JoinOptions().to_json() and old not in JoinOptions().to_json()
+
+
+@pytest.mark.parametrize(("old", "new", "value"), _RENAMED)
+def test_old_and_new_name_together_are_refused(old, new, value):
+    with pytest.raises(OptionsError, match=f"{old} and {new} are the same option.*give only {new}"):
+        JoinOptions(**{old: value, new: value})
+    with pytest.raises(OptionsError, match=f"give only {new}"):
+        JoinOptions.make({old: value, new: value})
+
+
+def test_join_and_solver_take_the_old_names_with_a_warning():
+    from igljoin import JoinSolver, join, phantoms
+
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.3)
+    args = (s.host, s.guest, s.host_curve, s.guest_curve)
+    with pytest.warns(DeprecationWarning, match="tolerance is now called energy_tolerance"):
+        res = join(*args, tolerance=1e-3, max_iterations=5)
+    assert res.options.energy_tolerance == 1e-3
+    solver = JoinSolver(*args, max_iterations=5)
+    with pytest.warns(DeprecationWarning, match="snap_fraction"):
+        res = solver.solve(snap_tolerance=0.2)
+    assert solver.options.snap_fraction == 0.2 and res.options.snap_fraction == 0.2
+    with pytest.raises(OptionsError, match="give only energy_tolerance"):
+        join(*args, tolerance=1e-3, energy_tolerance=1e-3)

@@ -234,7 +234,7 @@ def test_graft_is_not_twisted_and_its_placement_does_not_matter(graft):
     """Both ends' starts come from one rigid fit: the same join wherever the graft lies."""
     R = Rotation.from_rotvec([0.9, -0.4, 1.3]).as_matrix()
     moved = igljoin.Mesh(graft.guest.V @ R.T + [40.0, -25.0, 10.0], graft.guest.F)
-    opts = dict(smooth=False, tolerance=1e-9)  # the seams' pairing alone, converged tightly
+    opts = dict(smooth=False, energy_tolerance=1e-9)  # the seams' pairing alone, converged tightly
     a = igljoin.join(graft.hosts, graft.guest, seams=graft.seams, **opts)
     b = igljoin.join(graft.hosts, moved, seams=graft.seams, **opts)
     for sa, sb in zip(a.seams, b.seams):

@@ -212,7 +212,7 @@ def test_half_gradient_matches_finite_differences(patch):
 @pytest.mark.parametrize("acceleration", [0, 10])
 def test_energy_history_never_increases(tube, acceleration):
     solver = _solver(tube)
-    res = solver.solve(acceleration=acceleration, max_iterations=150, tolerance=1e-12)
+    res = solver.solve(acceleration=acceleration, max_iterations=150, energy_tolerance=1e-12)
     e = np.asarray(res.energy)
     # every plain step provably does not raise the energy, and the accelerated
     # one is accepted only if it lowers it; what remains is rounding of the
@@ -222,7 +222,7 @@ def test_energy_history_never_increases(tube, acceleration):
 
 
 def test_accelerated_run_reaches_the_plain_minimum(patch):
-    plain = _solver(patch, acceleration=0, tolerance=1e-13, max_iterations=20000).solve()
+    plain = _solver(patch, acceleration=0, energy_tolerance=1e-13, max_iterations=20000).solve()
     fast = _solver(patch).solve()  # the defaults
     assert plain.converged and fast.converged
     # the bound: the default (accelerated) join stops within 1e-6 of the
@@ -255,7 +255,7 @@ def test_max_iterations_is_respected(tube):
 
 def test_time_limit_is_respected(tube):
     solver = _solver(tube)
-    res = solver.solve(time_limit=1e-9, tolerance=1e-12)
+    res = solver.solve(time_limit=1e-9, energy_tolerance=1e-12)
     assert res.stop_reason == "time_limit" and not res.converged
     # the limit is checked after every iteration
     assert res.iterations == 1
@@ -401,7 +401,7 @@ def test_resolves_reuse_the_factorization(patch):
     runs = [
         solver.solve(targets),
         solver.solve(targets, start=first),
-        solver.solve(tolerance=1e-9, max_iterations=400),
+        solver.solve(energy_tolerance=1e-9, max_iterations=400),
         solver.solve(acceleration=3, time_limit=30.0),
         solver.solve(acceleration=0, max_iterations=5),
         solver.solve(initial_guess="rigid"),

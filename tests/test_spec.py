@@ -309,3 +309,25 @@ def test_spec_reports_the_objects_checks_with_the_file(tmp_path, sample, toml, m
     with pytest.raises(igljoin.SpecError, match=match) as info:
         load_case(make_case(tmp_path, sample, toml))
     assert "join.toml" in str(info.value)
+
+
+# ------------------------------------------------------------------- renamed options
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "value"),
+    [("tolerance", "energy_tolerance", 1e-3), ("snap_tolerance", "snap_fraction", 0.3),
+     ("smooth_tolerance", "smooth_keep_deg", 5.0)],
+)  # fmt: skip
+def test_old_option_names_in_join_toml_warn_and_both_are_refused(tmp_path, sample, old, new, value):
+    folder = make_case(tmp_path, sample, f"[options]\n{old} = {value}\n")
+    with pytest.warns(DeprecationWarning, match=f"join.toml: \\[options\\] the option {old} is now "
+                      f"called {new}"):  # fmt: skip
+        spec = load_case(folder)
+    assert getattr(spec.options, new) == value
+    assert new in spec.to_json()["options"] and old not in spec.to_json()["options"]
+    spec = load_case(make_case(tmp_path, sample, f"[options]\n{new} = {value}\n", "new"))
+    assert getattr(spec.options, new) == value
+    both = make_case(tmp_path, sample, f"[options]\n{old} = {value}\n{new} = {value}\n", "both")
+    with pytest.raises(igljoin.SpecError, match=f"{old} and {new} are the same option"):
+        load_case(both)

@@ -237,10 +237,17 @@ def test_open_curve_with_reversed_guest_is_flipped():
 def test_merged_is_cached_and_matches_weld(cases):
     res = cases["partial_patch/equal"].res
     assert res.merged is res.merged
-    again = weld(res)
+    again = res.weld()
     assert isinstance(again, Welded)
     np.testing.assert_array_equal(again.mesh.F, res.merged.mesh.F)
     np.testing.assert_array_equal(again.mesh.V, res.merged.mesh.V)
+    # the same weld from plain arrays and the seam records; without the guest's maps
+    # the welded mesh carries only its own attributes
+    plain = weld(res.host.V, res.host.F, res.guest.V, res.guest.F, res.seams)
+    np.testing.assert_array_equal(plain.mesh.F, res.merged.mesh.F)
+    np.testing.assert_array_equal(plain.mesh.V, res.merged.mesh.V)
+    assert set(plain.mesh.vertex_attributes) == {"seam", "source", "source_id"}
+    assert set(plain.mesh.face_attributes) == {"label", "source_face"}
 
 
 # -- errors -----------------------------------------------------------------------------------
@@ -291,7 +298,7 @@ def test_duplicated_seam_face_is_non_manifold(small):
     broken = _with_guest(res, res.guest.V, np.vstack([res.guest.F, res.guest.F[f]]), 1)
     # the copy adds a third face to each of the face's three edges, and to no other edge
     with pytest.raises(igljoin.WeldError, match=r"weld: 3 edges have more than two faces") as e:
-        weld(broken)
+        broken.weld()
     named = json.loads(str(e.value).split("seam vertices ")[1].split(" (")[0])
     # exactly the face's two seam vertices are named (merged ids follow the seam order)
     merged_of = dict(zip(res.seam.tolist(), res.merged.seam.tolist()))
@@ -306,7 +313,7 @@ def test_dangling_triangle_at_a_seam_vertex_is_not_vertex_manifold(small):
     V2 = np.vstack([X, X[v] + [[5.0, 0.0, 0.0], [5.0, 5.0, 0.0]]])
     F2 = np.vstack([F, [[v, len(X), len(X) + 1]]])
     with pytest.raises(igljoin.WeldError, match="separate fans of faces at seam vertices"):
-        weld(_with_guest(res, V2, F2, 1))
+        _with_guest(res, V2, F2, 1).weld()
 
 
 def test_inconsistent_orientation_is_named(small):
@@ -315,7 +322,7 @@ def test_inconsistent_orientation_is_named(small):
     f = _seam_face(res)
     F[f] = F[f, ::-1]
     with pytest.raises(igljoin.WeldError, match="same direction at seam vertices"):
-        weld(_with_guest(res, res.guest.V, F))
+        _with_guest(res, res.guest.V, F).weld()
 
 
 def test_zero_area_face_is_named(small):
@@ -326,12 +333,18 @@ def test_zero_area_face_is_named(small):
     pair = [x for x in (a, b, c) if x != inner]
     X[inner] = X[pair].mean(axis=0)  # the face collapses onto its seam edge
     with pytest.raises(igljoin.WeldError, match="zero area at seam vertices"):
-        weld(_with_guest(res, X, res.guest.F))
+        _with_guest(res, X, res.guest.F).weld()
 
 
-def test_weld_needs_a_join_result():
-    with pytest.raises(igljoin.WeldError, match="expected an igljoin.JoinResult"):
-        weld((np.zeros((3, 3)), np.array([[0, 1, 2]])))
+def test_weld_needs_seam_records_and_values_of_the_right_size(small):
+    res = small[1]
+    arrays = (res.host.V, res.host.F, res.guest.V, res.guest.F)
+    with pytest.raises(igljoin.WeldError, match="seams must be a non-empty list of igljoin.weld"):
+        weld(*arrays, [(res.host_curve, res.seam)])
+    with pytest.raises(igljoin.WeldError, match="seams must be a non-empty list"):
+        weld(*arrays, [])
+    with pytest.raises(igljoin.WeldError, match=r"area_ratio has shape \(3,\); give one value"):
+        weld(*arrays, res.seams, area_ratio=np.ones(3))
 
 
 # -- saved files ------------------------------------------------------------------------------
@@ -406,4 +419,4 @@ def test_zero_area_guest_face_far_from_the_seam_is_found(small):
     a, b, c = res.guest.F[far[-1]]
     X[c] = 0.5 * (X[a] + X[b])  # the face collapses onto one of its edges
     with pytest.raises(igljoin.WeldError, match="zero area"):
-        weld(_with_guest(res, X, res.guest.F))
+        _with_guest(res, X, res.guest.F).weld()
