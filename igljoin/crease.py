@@ -29,9 +29,11 @@ import numpy as np
 from .bandfit import BAND_EDGES, BandFit, band_fit, median_edge_near
 from .correspond import rigid_fit
 from .frames import unit
+from .seam_geometry import SeamGeometry
 
 __all__ = [
     "CreaseMeasure",
+    "SeamGeometry",
     "seam_crease",
     "input_crease",
     "default_band",
@@ -63,22 +65,15 @@ class CreaseMeasure:
     noise: np.ndarray
 
 
-def default_band(
-    Vh: np.ndarray,
-    Fh: np.ndarray,
-    host_curve: np.ndarray,
-    Vg: np.ndarray,
-    Fg: np.ndarray,
-    guest_curve: np.ndarray,
-) -> float:
+def default_band(seam: SeamGeometry, guest_curve: np.ndarray | None = None) -> float:
     """:data:`~igljoin.bandfit.BAND_EDGES` median edge lengths of the coarser side near the seam.
 
     Parameters
     ----------
-    Vh, Fh, host_curve, Vg, Fg
-        As in :func:`seam_crease`.
-    guest_curve : ndarray of int64, shape (s,)
-        Guest curve vertices.
+    seam : SeamGeometry
+    guest_curve : ndarray of int64, shape (s,), optional
+        Guest curve vertices whose edges count (default
+        ``seam.guest_at_host``; a join passes all its seam vertices).
 
     Returns
     -------
@@ -86,9 +81,13 @@ def default_band(
         In mesh units; also at most a quarter of the guest's size (twice its
         largest distance from its centroid).
     """
-    h = max(median_edge_near(Vh, Fh, host_curve), median_edge_near(Vg, Fg, guest_curve))
-    used = np.unique(np.asarray(Fg, dtype=np.int64))
-    Vu = np.asarray(Vg, dtype=np.float64)[used] if used.size else np.zeros((1, 3))
+    guest_curve = seam.guest_at_host if guest_curve is None else guest_curve
+    h = max(
+        median_edge_near(seam.Vh, seam.Fh, seam.host_curve),
+        median_edge_near(seam.Vg, seam.Fg, guest_curve),
+    )
+    used = np.unique(seam.Fg)
+    Vu = seam.Vg[used] if used.size else np.zeros((1, 3))
     # twice the largest distance from the centroid: unlike a bounding box's
     # diagonal, it does not change when the guest is turned
     size = 2.0 * float(np.linalg.norm(Vu - Vu.mean(axis=0), axis=1).max())
@@ -104,14 +103,12 @@ def _measure(guest, host, R: np.ndarray | None = None, g=None) -> CreaseMeasure:
     return CreaseMeasure(np.degrees(np.arccos(cos)), float(host.band), np.degrees(noise))
 
 
+def _host_fit(seam: SeamGeometry, band: float) -> BandFit:
+    return band_fit(seam.Vh, seam.Fh, seam.host_curve, seam.closed, band)
+
+
 def seam_crease(
-    Vh: np.ndarray,
-    Fh: np.ndarray,
-    host_curve: np.ndarray,
-    Vg: np.ndarray,
-    Fg: np.ndarray,
-    guest_at_host: np.ndarray,
-    closed: bool,
+    seam: SeamGeometry,
     band: float | None = None,
     rest: np.ndarray | None = None,
     host_fit: BandFit | None = None,
@@ -121,16 +118,9 @@ def seam_crease(
 
     Parameters
     ----------
-    Vh : ndarray, shape (n_h, 3)
-    Fh : ndarray of int64, shape (m_h, 3)
-    host_curve : ndarray of int64, shape (k,)
-        Ordered host curve vertices.
-    Vg : ndarray, shape (n_g, 3)
-    Fg : ndarray of int64, shape (m_g, 3)
-        The guest (joined, or in place for an uncut reference).
-    guest_at_host : ndarray of int64, shape (k,)
-        Guest vertex on each host curve vertex.
-    closed : bool
+    seam : SeamGeometry
+        The host, its curve and the guest on it (joined, or in place for an
+        uncut reference).
     band : float, optional
         Band width in mesh units (default :func:`default_band`).
     rest : ndarray, shape (n_g, 3), optional
@@ -139,36 +129,31 @@ def seam_crease(
         term does; the noise is that of the rest surface. Without it the guest
         is fitted as it lies (for a guest in place, the two agree).
     host_fit : BandFit, optional
-        The host's band fit along ``host_curve`` at ``band``, if already made.
+        The host's band fit along the host curve at ``band``, if already made.
     rest_fit : BandFit, optional
-        With ``rest``: the rest guest's band fit along ``guest_at_host``, if
-        already made.
+        With ``rest``: the rest guest's band fit along ``seam.guest_at_host``,
+        if already made.
 
     Returns
     -------
     CreaseMeasure
     """
     if band is None:
-        band = default_band(Vh, Fh, host_curve, Vg, Fg, guest_at_host)
-    host = host_fit or band_fit(Vh, Fh, host_curve, closed, band)
+        band = default_band(seam)
+    host = host_fit or _host_fit(seam, band)
     if rest is not None:
-        guest = rest_fit or band_fit(rest, Fg, guest_at_host, closed, band)
-        c = guest.weights @ np.asarray(Vg, dtype=np.float64)
+        guest = rest_fit or band_fit(rest, seam.Fg, seam.guest_at_host, seam.closed, band)
+        c = guest.weights @ seam.Vg
         T = host.frames.tangent
         return _measure(guest, host, g=unit(c - np.einsum("ij,ij->i", c, T)[:, None] * T))
-    P = np.asarray(Vh, dtype=np.float64)[np.asarray(host_curve, dtype=np.int64)]
-    guest = band_fit(Vg, Fg, guest_at_host, closed, band, curve_points=P)
+    guest = band_fit(
+        seam.Vg, seam.Fg, seam.guest_at_host, seam.closed, band, curve_points=seam.host_points
+    )
     return _measure(guest, host)
 
 
 def input_crease(
-    Vh: np.ndarray,
-    Fh: np.ndarray,
-    host_curve: np.ndarray,
-    Vg: np.ndarray,
-    Fg: np.ndarray,
-    guest_at_host: np.ndarray,
-    closed: bool,
+    seam: SeamGeometry,
     band: float,
     host_fit: BandFit | None = None,
     guest_fit: BandFit | None = None,
@@ -176,31 +161,28 @@ def input_crease(
     """Crease at which the rest guest, moved rigidly onto the host curve, meets the host.
 
     The guest's band fit is rotated by the rigid motion that best maps its
-    seam (``Vg[guest_at_host]``) onto the host curve; nothing is solved.
+    seam (``seam.Vg[seam.guest_at_host]``) onto the host curve; nothing is
+    solved.
 
     Parameters
     ----------
-    Vh, Fh, host_curve, Vg, Fg, guest_at_host, closed
-        As in :func:`seam_crease`, with ``Vg`` the rest guest.
+    seam : SeamGeometry
+        As in :func:`seam_crease`, with the guest at rest.
     band : float
         Band width in mesh units.
     host_fit : BandFit, optional
-        The host's band fit along ``host_curve`` at ``band``, if already made.
+        The host's band fit along the host curve at ``band``, if already made.
     guest_fit : BandFit, optional
-        The rest guest's band fit along ``guest_at_host`` at ``band``, if
+        The rest guest's band fit along ``seam.guest_at_host`` at ``band``, if
         already made.
 
     Returns
     -------
     CreaseMeasure
     """
-    host_curve = np.asarray(host_curve, dtype=np.int64)
-    guest_at_host = np.asarray(guest_at_host, dtype=np.int64)
-    Vh = np.asarray(Vh, dtype=np.float64)
-    Vg = np.asarray(Vg, dtype=np.float64)
-    R, _ = rigid_fit(Vg[guest_at_host], Vh[host_curve])
-    host = host_fit or band_fit(Vh, Fh, host_curve, closed, band)
-    guest = guest_fit or band_fit(Vg, Fg, guest_at_host, closed, band)
+    R, _ = rigid_fit(seam.Vg[seam.guest_at_host], seam.host_points)
+    host = host_fit or _host_fit(seam, band)
+    guest = guest_fit or band_fit(seam.Vg, seam.Fg, seam.guest_at_host, seam.closed, band)
     return _measure(guest, host, R)
 
 

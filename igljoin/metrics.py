@@ -43,6 +43,7 @@ from .correspond import rigid_fit
 from .errors import OptionsError
 from .frames import face_areas, face_normals_areas, seam_frames
 from .polyline import mean_segment
+from .seam_geometry import SeamGeometry
 
 __all__ = [
     "area_ratio",
@@ -172,21 +173,12 @@ def nonrigid_displacement(V0: np.ndarray, V1: np.ndarray) -> np.ndarray:
     return _row_norms(np.ascontiguousarray((V1 - (V0 @ R.T + t)).T))
 
 
-def crease_angles(
-    Vh: np.ndarray,
-    Fh: np.ndarray,
-    host_curve: np.ndarray,
-    Vg: np.ndarray,
-    Fg: np.ndarray,
-    guest_at_host: np.ndarray,
-    closed: bool,
-    host_inward: np.ndarray | None = None,
-) -> np.ndarray:
+def crease_angles(seam: SeamGeometry, host_inward: np.ndarray | None = None) -> np.ndarray:
     """One-ring crease angle in degrees at each host curve vertex.
 
     Parameters
     ----------
-    Vh, Fh, host_curve, Vg, Fg, guest_at_host, closed
+    seam : SeamGeometry
         The host, its curve and the guest lying on it, as in
         :func:`igljoin.crease.seam_crease`.
     host_inward : ndarray, shape (k, 3), optional
@@ -198,10 +190,11 @@ def crease_angles(
     -------
     ndarray, shape (k,)
     """
-    host_curve = np.asarray(host_curve, dtype=np.int64)
     if host_inward is None:
-        host_inward = seam_frames(Vh, Fh, host_curve, closed).inward
-    guest = seam_frames(Vg, Fg, guest_at_host, closed, curve_points=Vh[host_curve])
+        host_inward = seam_frames(seam.Vh, seam.Fh, seam.host_curve, seam.closed).inward
+    guest = seam_frames(
+        seam.Vg, seam.Fg, seam.guest_at_host, seam.closed, curve_points=seam.host_points
+    )
     cos = np.einsum("ij,ij->i", guest.inward, -host_inward)
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 

@@ -19,15 +19,23 @@ A join takes the stiffness as
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
 
+from .correspond import Correspondence
 from .errors import OptionsError
 from .mesh import Mesh
+from .options import JoinOptions
 
-__all__ = ["stiffness_from_regions", "stiffness_from_attribute"]
+__all__ = [
+    "stiffness_from_regions",
+    "stiffness_from_attribute",
+    "needs_guest",
+    "resolve_stiffness",
+    "refined_stiffness",
+]
 
 
 def _positive(value: Any, what: str) -> float:
@@ -166,3 +174,113 @@ def stiffness_from_attribute(mesh: Mesh, name: str) -> tuple[np.ndarray, str]:
             f"{values.dtype}; a stiffness map needs one number per {on}"
         )
     return values.astype(np.float64), on
+
+
+def _given(options: Any, overrides: dict, name: str) -> Any:
+    """The value of option ``name`` in ``overrides``, else in ``options``, else ``None``."""
+    if name in overrides:
+        return overrides[name]
+    if isinstance(options, JoinOptions):
+        return getattr(options, name)
+    if isinstance(options, Mapping):
+        return options.get(name)
+    return None
+
+
+def needs_guest(options: Any, overrides: dict, regions: Any) -> bool:
+    """Whether the stiffness must be resolved against the guest (regions or a name).
+
+    Parameters
+    ----------
+    options : JoinOptions, dict or None
+    overrides : dict
+        Keyword options of a join.
+    regions : list of (vertex_indices, k) or None
+
+    Returns
+    -------
+    bool
+    """
+    return regions is not None or isinstance(_given(options, overrides, "stiffness"), str)
+
+
+def resolve_stiffness(guest: Mesh, options: Any, overrides: dict, regions: Any) -> dict:
+    """``overrides`` with ``stiffness`` given as regions or as an attribute name made an array.
+
+    Parameters
+    ----------
+    guest : Mesh
+    options : JoinOptions, dict or None
+    overrides : dict
+        Keyword options; ``overrides["stiffness"]`` (or ``options``') may be a
+        guest attribute name.
+    regions : list of (vertex_indices, k) or None
+
+    Returns
+    -------
+    dict
+        ``overrides`` with ``stiffness`` (ndarray) and ``stiffness_on`` set.
+    """
+    given = _given(options, overrides, "stiffness")
+    if regions is not None:
+        if given is not None:
+            raise OptionsError(
+                "give either stiffness or stiffness_regions, not both; for regions on top of a "
+                "map, pass stiffness=stiffness_from_regions(n, regions, default=...) yourself"
+            )
+        values, on = stiffness_from_regions(guest.n_vertices, regions), "vertex"
+    else:
+        values, on = stiffness_from_attribute(guest, given)
+    on_given = _given(options, overrides, "stiffness_on")
+    if on_given not in (None, "auto", on):
+        raise OptionsError(
+            f"stiffness_on={on_given!r} but the stiffness map is per {on}; leave stiffness_on "
+            "unset (it is set from where the map was found)"
+        )
+    return {**overrides, "stiffness": values, "stiffness_on": on}
+
+
+def refined_stiffness(
+    options: JoinOptions, n: int, m: int, corr: Correspondence
+) -> tuple[np.ndarray | None, str]:
+    """The stiffness map of the options carried over to the guest refined by the seams.
+
+    Parameters
+    ----------
+    options : JoinOptions
+        ``stiffness`` (array or None) and ``stiffness_on``.
+    n, m : int
+        Vertex and face counts of the guest as given.
+    corr : Correspondence
+        The refined guest: inserted points (``inserted_from``, ``inserted_t``)
+        and each face's parent (``face_parent``).
+
+    Returns
+    -------
+    values : ndarray, shape (n',) or (m',), or None
+        Per refined vertex (inserted points interpolate their edge's ends) or
+        per refined face (its parent's); ``None`` without a map.
+    on : {"vertex", "face"}
+    """
+    if options.stiffness is None:
+        return None, "vertex"
+    k = options.stiffness
+    on = options.stiffness_on
+    if on == "auto":
+        if len(k) == n == m:
+            raise OptionsError(
+                "stiffness: the guest has as many vertices as faces, so a stiffness array "
+                "is ambiguous; set stiffness_on='vertex' or 'face'"
+            )
+        on = "vertex" if len(k) == n else "face" if len(k) == m else "?"
+    expected = n if on == "vertex" else m
+    if on == "?" or len(k) != expected:
+        raise OptionsError(
+            f"stiffness has {len(k)} values; give one per guest vertex ({n}) or per guest "
+            f"face ({m})"
+        )
+    if on == "vertex":
+        a, b = corr.inserted_from[:, 0], corr.inserted_from[:, 1]
+        extra = k[a] * (1.0 - corr.inserted_t) + k[b] * corr.inserted_t
+        return np.concatenate([k, extra]), "vertex"
+    return k[corr.face_parent], "face"

@@ -450,16 +450,23 @@ def _crease(Vh, Fh, host_curve, Vg, Fg, guest_at_host, band=None):
     """Seam crease (degrees, shape (k,)) and its band: the band measure where it exists.
 
     ``igljoin.crease.seam_crease`` measures from the surfaces fitted over a
-    band; older igljoin has only the one-ring measure
-    (``igljoin.metrics.crease_angles``), used then with band ``None``.
+    band (over an ``igljoin.seam_geometry.SeamGeometry``; older igljoin takes
+    the seven arrays themselves); older igljoin still has only the one-ring
+    measure (``igljoin.metrics.crease_angles``), used then with band ``None``.
     """
+    arrays = (Vh, Fh, host_curve, Vg, Fg, guest_at_host, True)
     try:
         from igljoin.crease import seam_crease
     except ImportError:
         from igljoin import metrics
 
-        return metrics.crease_angles(Vh, Fh, host_curve, Vg, Fg, guest_at_host, True), None
-    m = seam_crease(Vh, Fh, host_curve, Vg, Fg, guest_at_host, True, band=band)
+        return metrics.crease_angles(*arrays), None
+    try:
+        from igljoin.seam_geometry import SeamGeometry
+    except ImportError:
+        m = seam_crease(*arrays, band=band)
+    else:
+        m = seam_crease(SeamGeometry(*arrays), band=band)
     return np.asarray(m.angles), float(m.band)
 
 

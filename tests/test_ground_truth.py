@@ -7,6 +7,7 @@ import pytest
 
 import igljoin
 from igljoin import metrics
+from igljoin.seam_geometry import SeamGeometry
 
 from .cuts import cut_piece, rigid_motion, sample_mesh_dir
 
@@ -43,13 +44,15 @@ def rejoined(bunny):
         moved = igljoin.Mesh(cut.piece.V @ R.T + t, cut.piece.F)
         res = igljoin.join(cut.host, moved, cut.host_curve, None, smooth=True)
         uncut = metrics.crease_angles(
-            cut.host.V,
-            cut.host.F,
-            cut.host_curve,
-            cut.piece.V,
-            cut.piece.F,
-            cut.piece_at_host,
-            True,
+            SeamGeometry(
+                cut.host.V,
+                cut.host.F,
+                cut.host_curve,
+                cut.piece.V,
+                cut.piece.F,
+                cut.piece_at_host,
+                True,
+            )
         )
         out.append((center, radius, cut, res, uncut))
     return out

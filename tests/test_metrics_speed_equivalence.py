@@ -26,6 +26,7 @@ import igljoin
 from igljoin import frames, metrics, phantoms, topology
 from igljoin.correspond import rigid_fit
 from igljoin.mesh import Mesh
+from igljoin.seam_geometry import SeamGeometry
 
 weld_mod = importlib.import_module("igljoin.weld")
 
@@ -288,13 +289,15 @@ def test_crease_and_host_dihedral_angles_match_the_plain_computation(joins):
         for _ in range(2):  # computed, then read from the host's cache
             _assert_same(
                 metrics.crease_angles(
-                    res.host.V,
-                    res.host.F,
-                    sm.host_curve,
-                    res.guest.V,
-                    res.guest.F,
-                    sm.guest_at_host,
-                    sm.closed,
+                    SeamGeometry(
+                        res.host.V,
+                        res.host.F,
+                        sm.host_curve,
+                        res.guest.V,
+                        res.guest.F,
+                        sm.guest_at_host,
+                        sm.closed,
+                    )
                 ),
                 crease,
             )
@@ -324,10 +327,10 @@ def test_host_values_follow_the_arrays_and_are_kept_on_the_solver():
     # a solver makes its rigid host's values once and reuses them on every solve
     solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
     a = solver.solve()
-    kept = dict(solver._host_values)
+    kept = dict(solver.host_values.made)
     assert {key[0] for key in kept} == {"band_fit", "inward", "dihedral"}
     b = solver.solve()
-    assert all(solver._host_values[key] is value for key, value in kept.items())
+    assert all(solver.host_values.made[key] is value for key, value in kept.items())
     # and they are what the plain functions give
     plain = metrics.host_dihedral_angles(s.host.V, s.host.F, s.host_curve)
     assert b.metrics["host_dihedral_deg"]["max"] == float(plain.max())

@@ -1,0 +1,284 @@
+"""The paper's §4.2–4.4 for one join: its energy terms, built from its options.
+
+Shape (§4.2) and stretch (§4.3) terms are over the refined guest; each seam
+adds a smooth-join term (§4.4): against the host's band-fitted tangent planes
+tilted by the crease the join keeps (``smooth_mode="band"``,
+:mod:`igljoin.band_targets`), or against the host's cross-seam frames
+(``"paper"``: one-ring; ``"robust"``: smoothed over a radius).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import band_targets
+from .bandfit import band_fit
+from .boundary import SelectedCurve
+from .correspond import Correspondence
+from .crease import SeamGeometry, default_band
+from .errors import OptionsError
+from .frames import SeamFrames, seam_frames, unit
+from .host_values import HostValues
+from .mesh import Mesh
+from .options import JoinOptions
+from .polyline import mean_segment
+from .stiffness import refined_stiffness
+from .terms import ShapeTerm, SmoothJoinTerm, StretchTerm, Term, edge_stiffness
+
+__all__ = ["JoinTerms", "build_terms", "join_angles", "seam_bands", "interpolate_frames"]
+
+
+@dataclass
+class JoinTerms:
+    """The terms of a join and what building them found.
+
+    Attributes
+    ----------
+    terms : list of Term
+        Shape, stretch, then one smooth-join term per seam (each if its
+        weight is positive).
+    smooth_keep_degs : list of float
+        Per smooth-join term: the crease (degrees) it tolerates.
+    crease_removed : list of ndarray
+        Per band smooth-join term, shape (s,): the crease (degrees) it
+        removes at each seam vertex (empty for the other modes).
+    """
+
+    terms: list[Term]
+    smooth_keep_degs: list[float]
+    crease_removed: list[np.ndarray]
+
+
+def interpolate_frames(
+    frames: SeamFrames, edge: np.ndarray, t: np.ndarray, closed: bool
+) -> SeamFrames:
+    """Frames along a curve at points on its edges, interpolated and made orthonormal.
+
+    Parameters
+    ----------
+    frames : SeamFrames
+        At the curve's ``k`` vertices.
+    edge : ndarray of int64, shape (s,)
+        Curve edge of each point (from vertex ``edge`` to the next).
+    t : ndarray, shape (s,)
+        Position of each point along its edge, in ``[0, 1]``.
+    closed : bool
+
+    Returns
+    -------
+    SeamFrames
+        Shape (s, 3) each.
+    """
+    k = len(frames.normal)
+    nxt = (edge + 1) % k if closed else np.minimum(edge + 1, k - 1)
+
+    def lerp(A):
+        return unit(A[edge] * (1.0 - t)[:, None] + A[nxt] * t[:, None])
+
+    normal = lerp(frames.normal)
+    inward = lerp(frames.inward)
+    inward = unit(inward - np.einsum("ij,ij->i", inward, normal)[:, None] * normal)
+    return SeamFrames(normal=normal, tangent=lerp(frames.tangent), inward=inward)
+
+
+def join_angles(options: JoinOptions, k: int) -> list:
+    """``join_angle`` per seam of ``k`` (None: the default smooth join)."""
+    angle = options.join_angle
+    if not isinstance(angle, tuple):
+        return [angle] * k
+    if len(angle) != k:
+        raise OptionsError(
+            f"join_angle has {len(angle)} values for {k} seam{'s' if k != 1 else ''}; "
+            "give one per seam (None keeps a seam's default) or a single angle"
+        )
+    return list(angle)
+
+
+def seam_bands(
+    options: JoinOptions, host: Mesh, corr: Correspondence, curves: list, parts: list
+) -> list[float]:
+    """The band width of each seam: ``smooth_band``, else :func:`igljoin.crease.default_band`.
+
+    Parameters
+    ----------
+    options : JoinOptions
+    host : Mesh
+    corr : Correspondence
+        Of all seams (the refined guest).
+    curves : list of SelectedCurve
+        The host curve of each seam.
+    parts : list of Correspondence
+        Each seam's own correspondence.
+
+    Returns
+    -------
+    list of float
+    """
+    return [
+        options.smooth_band
+        or default_band(
+            SeamGeometry(
+                host.V, host.F, hc.indices, corr.V, corr.F, part.seam[part.host_hit], hc.closed
+            ),
+            guest_curve=part.seam,
+        )
+        for hc, part in zip(curves, parts)
+    ]
+
+
+def _band_term(
+    options: JoinOptions,
+    corr: Correspondence,
+    part: Correspondence,
+    curve: SelectedCurve,
+    host: Mesh,
+    host_values: HostValues,
+    band: float,
+    angle: float | None,
+) -> tuple[SmoothJoinTerm, np.ndarray]:
+    """The band smooth-join term of one seam and the crease it removes (degrees, shape (s,)).
+
+    The host's band-fitted tangent planes at the seam targets are tilted by
+    the elevation the join keeps (the rest guest's, less the crease coherent
+    along the seam), and the guest's band-fitted direction off each seam
+    vertex is pulled into them. ``smooth_keep_deg`` widens that into a wedge.
+    """
+    host_fit = host_values.band_fit(curve, band)
+    edge, t = part.host_edge, part.host_edge_t
+    at_seam = interpolate_frames(host_fit.frames, edge, t, curve.closed)
+    guest_fit = band_fit(corr.V, corr.F, part.seam, curve.closed, band)
+    k = len(curve.indices)
+    nxt = (edge + 1) % k if curve.closed else np.minimum(edge + 1, k - 1)
+    P = host.V[curve.indices]
+    targets = P[edge] * (1.0 - t)[:, None] + P[nxt] * t[:, None]
+    host_se = host_fit.slope_error[edge] * (1.0 - t) + host_fit.slope_error[nxt] * t
+    kept, removed = band_targets.kept_elevation(
+        at_seam,
+        guest_fit.frames.inward,
+        corr.V[part.seam],
+        targets,
+        np.hypot(host_se, guest_fit.slope_error),
+        curve.closed,
+        band,
+        join_angle=angle,
+        join_side=options.join_side,
+    )
+    term = SmoothJoinTerm(
+        corr.V,
+        corr.F,
+        part.seam,
+        band_targets.tilted_frames(at_seam, kept),
+        options.smooth_weight,
+        "band",
+        np.radians(float(options.smooth_keep_deg or 0.0)),
+        fit=guest_fit,
+    )
+    return term, np.degrees(np.abs(removed))
+
+
+def _smooth_keep_deg(
+    options: JoinOptions, host: Mesh, smoothed: SeamFrames, curve: SelectedCurve
+) -> float:
+    """Crease (degrees) the robust smooth join tolerates: the host's own normal noise.
+
+    The median angle between the host's one-ring and smoothed cross-seam
+    directions along ``curve``, unless ``smooth_keep_deg`` is given.
+    """
+    opt = options
+    if opt.smooth_mode == "paper" or (opt.smooth_keep_deg is None and opt.smooth_radius == 0):
+        return 0.0
+    if opt.smooth_keep_deg is not None:
+        return float(opt.smooth_keep_deg)
+    onering = seam_frames(host.V, host.F, curve.indices, curve.closed)
+    cos = np.clip(np.einsum("ij,ij->i", onering.inward, smoothed.inward), -1.0, 1.0)
+    return float(np.degrees(np.median(np.arccos(cos))))
+
+
+def _frame_term(
+    options: JoinOptions,
+    corr: Correspondence,
+    part: Correspondence,
+    curve: SelectedCurve,
+    host: Mesh,
+) -> tuple[SmoothJoinTerm, float]:
+    """The paper's or the robust smooth-join term of one seam, and the crease it tolerates."""
+    opt = options
+    mean_edge = mean_segment(host.V[curve.indices], curve.closed)
+    radius = None if opt.smooth_mode == "paper" else opt.smooth_radius * mean_edge
+    radius = radius or None
+    frames = seam_frames(host.V, host.F, curve.indices, curve.closed, radius=radius)
+    at_seam = interpolate_frames(frames, part.host_edge, part.host_edge_t, curve.closed)
+    tolerance = _smooth_keep_deg(opt, host, frames, curve)
+    term = SmoothJoinTerm(
+        corr.V,
+        corr.F,
+        part.seam,
+        at_seam,
+        opt.smooth_weight,
+        opt.smooth_mode,
+        np.radians(tolerance),
+    )
+    return term, tolerance
+
+
+def build_terms(
+    options: JoinOptions,
+    corr: Correspondence,
+    E: np.ndarray,
+    guest: Mesh,
+    host: Mesh,
+    host_values: HostValues,
+    curves: list,
+    parts: list,
+    bands: list[float],
+) -> JoinTerms:
+    """The terms of a join (§4.2–4.4) over its refined guest.
+
+    Parameters
+    ----------
+    options : JoinOptions
+    corr : Correspondence
+        Of all seams: the refined rest guest ``corr.V, corr.F``.
+    E : ndarray of int64, shape (e, 2)
+        Its unique edges.
+    guest : Mesh
+        The guest as given (its counts place a stiffness map).
+    host : Mesh
+        The (combined) host.
+    host_values : HostValues
+        The host's kept values (band fits).
+    curves : list of SelectedCurve
+        The host curve of each seam.
+    parts : list of Correspondence
+        Each seam's own correspondence.
+    bands : list of float
+        Each seam's band width (:func:`seam_bands`).
+
+    Returns
+    -------
+    JoinTerms
+    """
+    opt, c = options, corr
+    terms: list[Term] = []
+    if opt.shape_weight > 0:
+        terms.append(ShapeTerm(c.V, c.F, opt.shape_weight, opt.laplacian, opt.rotation_aware, E=E))
+    if opt.stretch_weight > 0:
+        k = edge_stiffness(E, c.F, *refined_stiffness(opt, guest.n_vertices, guest.n_faces, c))
+        terms.append(StretchTerm(c.V, E, opt.stretch_weight * k))
+    keep: list[float] = []
+    removed: list[np.ndarray] = []
+    if opt.smooth and opt.smooth_weight > 0 and opt.smooth_mode == "band":
+        angles = join_angles(opt, len(curves))
+        for hc, part, band, angle in zip(curves, parts, bands, angles):
+            term, crease = _band_term(opt, c, part, hc, host, host_values, band, angle)
+            terms.append(term)
+            removed.append(crease)
+            keep.append(float(opt.smooth_keep_deg or 0.0))
+    elif opt.smooth and opt.smooth_weight > 0:
+        for hc, part in zip(curves, parts):
+            term, tolerance = _frame_term(opt, c, part, hc, host)
+            terms.append(term)
+            keep.append(tolerance)
+    return JoinTerms(terms, keep, removed)

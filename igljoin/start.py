@@ -1,0 +1,109 @@
+"""Where the local/global iteration (§4.5) starts: the rest guest moved onto its seam.
+
+:func:`rigid_start` places the rest guest by the rigid motion that best fits
+its seam onto the targets; the solver then extends the remaining seam move
+smoothly (:meth:`igljoin.solve.LocalGlobalSolver.extend`), and :func:`bulge`
+lifts a guest that this leaves compressed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from .boundary import SelectedCurve, boundary_loops
+from .correspond import rigid_fit
+from .frames import face_normals_areas, seam_frames
+from .mesh import Mesh
+
+__all__ = ["rigid_start", "bulge"]
+
+
+def rigid_start(V: np.ndarray, seam: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """``V`` moved by the rigid motion that best fits ``V[seam]`` onto ``targets``.
+
+    Parameters
+    ----------
+    V : ndarray, shape (n, 3)
+    seam : ndarray of int64, shape (s,)
+    targets : ndarray, shape (s, 3)
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+    """
+    R, t = rigid_fit(V[seam], targets)
+    return V @ R.T + t
+
+
+def bulge(
+    X: np.ndarray,
+    V: np.ndarray,
+    F: np.ndarray,
+    seam: np.ndarray,
+    host: Mesh,
+    curve: SelectedCurve | None,
+    bump: Callable[[], np.ndarray],
+) -> np.ndarray:
+    """Lift a compressed disk-like guest off its plane so that it bulges instead of shrinking.
+
+    A guest whose boundary is longer than the host's (paper §5: "it bulged
+    to match the shape of the host") would otherwise start from a flat,
+    compressed state that the iteration leaves only slowly. The lift is
+    the guest's response to a unit load along the host's mean seam normal,
+    on the side the host surface curves towards, with its height chosen
+    so that the guest's area is its rest area.
+
+    Parameters
+    ----------
+    X : ndarray, shape (n, 3)
+        Start positions of the guest.
+    V : ndarray, shape (n, 3)
+    F : ndarray of int64, shape (m, 3)
+        The rest guest.
+    seam : ndarray of int64, shape (s,)
+        Its seam vertices.
+    host : Mesh
+    curve : SelectedCurve or None
+        The host curve of a single seam (``None`` with several: no lift).
+    bump : callable
+        Returns the guest's response to a unit load on its free vertices,
+        shape (n,) (:meth:`igljoin.solve.LocalGlobalSolver.bump`); called
+        only when a lift is made.
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        ``X``, lifted where the guest is a disk on a closed curve and is
+        compressed by more than 0.1 % of its area.
+    """
+    if curve is None or not curve.closed or len(boundary_loops(F)) != 1:
+        return X
+    rest = face_normals_areas(V, F)[1].sum()
+    if face_normals_areas(X, F)[1].sum() >= (1.0 - 1e-3) * rest:
+        return X
+    frames = seam_frames(host.V, host.F, curve.indices, True)
+    N = frames.normal.mean(axis=0)
+    if np.linalg.norm(N) == 0:
+        return X
+    N = N / np.linalg.norm(N)
+    side = float(np.mean(-frames.inward @ N))
+    if abs(side) < 1e-3:
+        side = float((V.mean(axis=0) - V[seam].mean(axis=0)) @ N) or 1.0
+    phi = bump()
+    if phi.max() <= 0:
+        return X
+    lift = np.sign(side) * (phi / phi.max())[:, None] * N
+
+    def area(a):
+        return face_normals_areas(X + a * lift, F)[1].sum()
+
+    hi = float(np.linalg.norm(np.ptp(V, axis=0)))
+    if area(hi) < rest:
+        return X + hi * lift
+    lo = 0.0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if area(mid) < rest else (lo, mid)
+    return X + 0.5 * (lo + hi) * lift
