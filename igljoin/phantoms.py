@@ -785,6 +785,37 @@ def _loop_through(F: np.ndarray, vertex: int) -> int:
     return next(k for k, lp in enumerate(boundary_loops(F)) if vertex in lp)
 
 
+def _sample(
+    scenario: str,
+    label: str,
+    host: Mesh,
+    guest: Mesh,
+    host_curve: np.ndarray,
+    guest_curve: np.ndarray | Curve | None,
+    guest_points: np.ndarray,
+    closed: bool,
+    description: str,
+) -> Sample:
+    """A :class:`Sample` of ``scenario``, its boundary ratio measured on the built meshes.
+
+    ``guest_points`` (shape (k', 3)) are the guest seam curve's positions in
+    order; the ratio is their polyline length over the host curve's.
+    """
+    ratio = polyline_length(guest_points, closed) / polyline_length(host.V[host_curve], closed)
+    return Sample(
+        name=f"{scenario}/{label}",
+        scenario=scenario,
+        length=label,
+        host=host,
+        guest=guest,
+        host_curve=host_curve,
+        guest_curve=guest_curve,
+        closed=closed,
+        boundary_ratio=ratio,
+        description=description,
+    )
+
+
 def _end_to_end(ratio, label, res, gres, irregularity, seed) -> Sample:
     n_h = _count(_E2E_N_AROUND, res, 8)
     tube = artery_tube(
@@ -815,18 +846,16 @@ def _end_to_end(ratio, label, res, gres, irregularity, seed) -> Sample:
     )
     gV, gF = _affine(g.V, g.F, _rotation("x", 15.0), (1.0, 0.0, 3.0))
     guest = Mesh(gV, gF, name="guest artery")
-    measured = polyline_length(guest.V[:n_g]) / L_host
-    return Sample(
-        name=f"end_to_end/{label}",
-        scenario="end_to_end",
-        length=label,
-        host=host,
-        guest=guest,
-        host_curve=host_curve,
-        guest_curve=Curve(loop=_loop_through(guest.F, 0)),
-        closed=True,
-        boundary_ratio=measured,
-        description=(
+    return _sample(
+        "end_to_end",
+        label,
+        host,
+        guest,
+        host_curve,
+        Curve(loop=_loop_through(guest.F, 0)),
+        guest.V[:n_g],
+        True,
+        (
             "End-to-end anastomosis: a rigid artery stump (radius 4 mm, z <= 0) cut at 30 "
             f"degrees, and a straight artery (radius {r_g:.3f} mm) whose end circle is "
             f"{ratio:g} x the stump's elliptic end, starting 3 mm above it, tilted 15 degrees "
@@ -863,18 +892,16 @@ def _partial_patch(ratio, label, res, gres, irregularity, seed) -> Sample:
     M = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]]) @ _rotation("z", 10.0)
     gV, gF = _affine(p.V, p.F, M, (radius + 5.0, 0.0, 0.0))
     guest = Mesh(gV, gF, name="guest patch")
-    measured = polyline_length(guest.V[:n_b]) / L_host
-    return Sample(
-        name=f"partial_patch/{label}",
-        scenario="partial_patch",
-        length=label,
-        host=host,
-        guest=guest,
-        host_curve=host_curve,
-        guest_curve=None,
-        closed=True,
-        boundary_ratio=measured,
-        description=(
+    return _sample(
+        "partial_patch",
+        label,
+        host,
+        guest,
+        host_curve,
+        None,
+        guest.V[:n_b],
+        True,
+        (
             "Partial patching: a rigid 120-degree piece of aortic wall (radius 15 mm) with an "
             f"elliptic 16 x 10 mm hole, and a flat elliptic patch whose perimeter is {ratio:g} x "
             "the hole's, 5 mm outside the wall, facing outward, turned 10 degrees about its "
@@ -917,20 +944,16 @@ def _open_strip(ratio, label, res, gres, irregularity, seed) -> Sample:
     gV, gF = _affine(np.column_stack([Q, np.zeros(Q.shape[0])]), gF, M, base)
     guest = Mesh(gV, gF, name="guest flat strip")
     guest_curve = np.arange(g_z, dtype=np.int64) * g_s
-    measured = polyline_length(guest.V[guest_curve], closed=False) / polyline_length(
-        host.V[host_curve], closed=False
-    )
-    return Sample(
-        name=f"open_strip/{label}",
-        scenario="open_strip",
-        length=label,
-        host=host,
-        guest=guest,
-        host_curve=host_curve,
-        guest_curve=guest_curve,
-        closed=False,
-        boundary_ratio=measured,
-        description=(
+    return _sample(
+        "open_strip",
+        label,
+        host,
+        guest,
+        host_curve,
+        guest_curve,
+        guest.V[guest_curve],
+        False,
+        (
             "Open seam: a rigid strip of cylinder wall (radius 15 mm, 0-40 degrees, z 0-30 mm) "
             f"and a flat 12 mm wide strip whose joined side is {ratio:g} x the host side at 40 "
             "degrees, leaving it 2 mm away, tilted 20 degrees outward from the tangent."

@@ -21,14 +21,12 @@ class SeamGeometry:
 
     Parameters
     ----------
-    Vh : array_like, shape (n_h, 3)
-    Fh : array_like of int, shape (m_h, 3)
-        The host.
+    Vh, Fh : array_like, shapes (n_h, 3) and (m_h, 3)
+        The host's vertex positions and triangles (vertex indices).
     host_curve : array_like of int, shape (k,)
         Ordered host curve vertices.
-    Vg : array_like, shape (n_g, 3)
-    Fg : array_like of int, shape (m_g, 3)
-        The guest (joined, at rest, or in place for an uncut reference).
+    Vg, Fg : array_like, shapes (n_g, 3) and (m_g, 3)
+        The guest's, joined, at rest, or in place for an uncut reference.
     guest_at_host : array_like of int, shape (k,)
         Guest vertex on each host curve vertex.
     closed : bool
