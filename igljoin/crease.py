@@ -33,7 +33,6 @@ from .seam_geometry import SeamGeometry
 
 __all__ = [
     "CreaseMeasure",
-    "SeamGeometry",
     "seam_crease",
     "input_crease",
     "default_band",

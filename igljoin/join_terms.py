@@ -17,13 +17,14 @@ from . import band_targets
 from .bandfit import band_fit
 from .boundary import SelectedCurve
 from .correspond import Correspondence
-from .crease import SeamGeometry, default_band
+from .crease import default_band
 from .errors import OptionsError
 from .frames import SeamFrames, seam_frames, unit
 from .host_values import HostValues
 from .mesh import Mesh
 from .options import JoinOptions
 from .polyline import mean_segment
+from .seam_geometry import SeamGeometry
 from .stiffness import refined_stiffness
 from .terms import ShapeTerm, SmoothJoinTerm, StretchTerm, Term, edge_stiffness
 

@@ -17,7 +17,7 @@ import numpy as np
 from . import crease, metrics
 from .bandfit import BandFit, band_fit
 from .correspond import Correspondence
-from .crease import CreaseMeasure, SeamGeometry
+from .crease import CreaseMeasure
 from .frames import face_normals_areas
 from .host_values import HostValues
 from .join_terms import JoinTerms, join_angles
@@ -25,6 +25,7 @@ from .measure import combined_gap
 from .mesh import Mesh
 from .options import JoinOptions
 from .result import JoinedSeam, JoinResult
+from .seam_geometry import SeamGeometry
 
 __all__ = ["join_result"]
 
