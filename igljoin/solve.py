@@ -237,6 +237,7 @@ class LocalGlobalSolver:
         scale: float = 1.0,
         acceleration: int = 5,
         callback=None,
+        model=None,
     ) -> IterationResult:
         """Iterate from ``X0`` (shape (n, 3)) until the iterates settle.
 
@@ -272,6 +273,14 @@ class LocalGlobalSolver:
             Quasi-Newton history length; 0 for the plain local/global iteration.
         callback : callable, optional
             Called as ``callback(iteration, energy)`` after every iteration.
+        model : optional
+            A replacement of the initial inverse Hessian ``P_ff⁻¹`` of the
+            quasi-Newton steps (e.g. :class:`igljoin.newton.NewtonModel`):
+            an object with ``refresh(state, iteration) -> bool`` (called
+            before every iteration with the current local state; ``True``
+            when the model changed, which drops the quasi-Newton memory) and
+            ``solve_free(v)`` for ``v`` of shape (n_free, 3). The plain
+            fallback step stays ``Q``'s.
 
         Returns
         -------
@@ -296,7 +305,10 @@ class LocalGlobalSolver:
         def back_solve(v, plain=False):
             # the quasi-Newton steps use the preconditioner P; the plain global step is Q's
             t0 = time.perf_counter()
-            factor = self.plain_factor() if plain or acceleration == 0 else self.factor
+            if plain or acceleration == 0:
+                factor = self.plain_factor()
+            else:
+                factor = self.factor if model is None else model
             out = factor.solve_free(v)
             clock["solve"] += time.perf_counter() - t0
             stats["back_solves"] += 1
@@ -320,6 +332,11 @@ class LocalGlobalSolver:
         floor = self.energy_floor(X, tolerance)
         for it in range(1, max_iterations + 1):
             hint = state.rotations
+            if model is not None and acceleration > 0:
+                t0 = time.perf_counter()
+                if model.refresh(state, it):
+                    memory.clear()
+                clock["model"] = clock.get("model", 0.0) + time.perf_counter() - t0
             if acceleration > 0 and memory.size:
                 d = -memory.apply(g, back_solve)
                 gd = float(np.vdot(g, d))

@@ -167,6 +167,42 @@ def _resolves(solver, first, steps: int) -> dict:
     }
 
 
+def _newton(solver, res) -> dict:
+    """The same join with the Gauss–Newton model as the initial Hessian (igljoin.newton).
+
+    Same start, seam targets, tolerance and quasi-Newton memory as the join's
+    own iteration; only the model ``P`` is replaced (assembled and factored
+    once, at the start). Returns its iterations, time split and the energy
+    gap to the join's result (negative: it ended lower).
+    """
+    from igljoin.newton import NewtonModel
+
+    ls, opt = solver.solver, solver.options
+    X0 = solver.initial_guess()
+    model = NewtonModel(ls)
+    t0 = time.perf_counter()
+    run = ls.run(
+        X0,
+        solver.corr.targets,
+        max_iterations=opt.max_iterations,
+        tolerance=opt.tolerance,
+        scale=solver.guest_mean_edge,
+        acceleration=opt.acceleration,
+        model=model,
+    )
+    seconds = time.perf_counter() - t0
+    e = float(res.energy[-1])
+    return {
+        "iterations": int(run.iterations),
+        "converged": bool(run.converged),
+        "seconds": seconds,
+        "assemble_seconds": model.seconds["assemble"],
+        "factor_seconds": model.seconds["factor"],
+        "energy": float(run.energy[-1]),
+        "relative_gap": (float(run.energy[-1]) - e) / abs(e),
+    }
+
+
 def run_case(spec: dict) -> dict:
     """Time one case; returns plain JSON."""
     t0 = time.perf_counter()
@@ -227,6 +263,8 @@ def run_case(spec: dict) -> dict:
     }
     if spec.get("resolves"):
         out["resolve"] = _resolves(solver, res, int(spec["resolves"]))
+    if spec.get("newton"):
+        out["newton"] = _newton(solver, res)
     if spec["kind"] == "host":
         # the same join with the whole host checked and selected (the path of a small
         # host, and of every host before the neighbourhood checks), back to back
@@ -553,6 +591,7 @@ def markdown(results: dict) -> str:
     lines += _resolve_table(cases)
     lines += _host_table(cases)
     lines += _iteration_table(cases)
+    lines += _newton_table(cases)
     lines += _floor_table(cases)
     return "\n".join(lines) + "\n"
 
@@ -707,6 +746,41 @@ def _iteration_table(cases: list[dict]) -> list[str]:
     return lines
 
 
+def _newton_table(cases: list[dict]) -> list[str]:
+    """Iterations of L-BFGS on ``P`` against L-BFGS on the Gauss–Newton model, side by side."""
+    rows = [c for c in cases if c.get("newton") or c["spec"]["kind"] in ("patch", "tube")]
+    if not any(c.get("newton") for c in rows):
+        return []
+    lines = [
+        "",
+        "### Iterations: the factored P against the Gauss–Newton model",
+        "",
+        "The same join from the same start with the initial Hessian of the quasi-Newton "
+        "iteration replaced by the Gauss–Newton model with the rotations eliminated "
+        "(`igljoin.newton`, assembled and factored once, 3n × 3n). *gap*: its final energy "
+        "against the join's, relative (negative: lower). *assemble + factor*: the model's "
+        "cost, on top of the iteration. — : not run (its factorization grows too fast; "
+        "docs/limits.md).",
+        "",
+        "| case | guest vertices | iterations, P | iterations, Gauss–Newton | join (ms) "
+        "| Gauss–Newton iteration (ms) | of which assemble + factor | gap |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for c in rows:
+        g = c.get("newton")
+        if g:
+            its = str(g["iterations"]) + ("" if g["converged"] else " (cap)")
+            cells = (
+                f"{its} | {_ms(c['join_seconds'])} | {_ms(g['seconds'])} | "
+                f"{_ms(g['assemble_seconds'] + g['factor_seconds'])} | "
+                f"{g['relative_gap']:.1e}"
+            )
+        else:
+            cells = f"— | {_ms(c['join_seconds'])} | — | — | —"
+        lines.append(f"| {c['name']} | {c['counts']['points']:,} | {c['iterations']} | {cells} |")
+    return lines
+
+
 def _kind_rank(case: dict) -> tuple:
     """Position of a case in a full run: paper samples, the large host, guests by size."""
     spec = case["spec"]
@@ -766,6 +840,7 @@ def main(argv=None) -> int:
             "runs": runs,
             "plain_iterations": plain,
             "resolves": runs,
+            "newton": True,
         }
         for sc, ln in SAMPLES
     ]
@@ -782,6 +857,9 @@ def main(argv=None) -> int:
                 "time_limit": million_budget if v >= 1_000_000 else None,
                 # the long plain run is affordable up to ~10k vertices (minutes)
                 "plain_iterations": plain if v <= 10_000 else None,
+                # the Gauss–Newton model's 3n × 3n factorization took 7 s at 10k (17× the
+                # scalar one); at 100k it would take minutes and gigabytes
+                "newton": v <= 10_000,
             }
         )
     results = {"machine": _machine(), "cases": []}
