@@ -61,12 +61,14 @@ _LAZY = {
 }
 
 #: Submodules reachable as attributes (``igljoin.phantoms``) without an import statement,
-#: as they were when ``import igljoin`` imported everything.
+#: as they were when ``import igljoin`` imported everything: every submodule but the
+#: three whose name is a public function (``join``, ``clean``, ``weld``).
 _SUBMODULES = (
     "atomic", "band_targets", "bandfit", "boundary", "cli", "correspond", "crease", "demo",
-    "errors", "frames", "io", "kernels", "linsolve", "mesh", "metrics", "options", "phantoms",
-    "pipeline", "plain", "polyline", "quality", "result", "rotations", "solve", "spec",
-    "stiffness", "terms", "topology", "validate", "viz",
+    "errors", "frames", "host_values", "io", "join_terms", "kernels", "linsolve", "measure",
+    "measure_join", "mesh", "metrics", "newton", "options", "outputs", "phantoms", "pipeline",
+    "plain", "polyline", "quality", "result", "rotations", "seam_geometry", "seams", "solve",
+    "spec", "start", "stiffness", "terms", "topology", "validate", "viz",
 )  # fmt: skip
 
 __all__ = [

@@ -95,6 +95,29 @@ def test_functions_named_like_their_submodule_stay_functions():
     assert "numba" in got["loaded"]  # the solver did load here: the probe saw real imports
 
 
+def test_every_submodule_is_an_attribute_of_the_package():
+    """Each ``igljoin/<name>.py`` and sub-package is ``igljoin.<name>`` without an import.
+
+    The three sharing their name with a public function (``join``, ``clean``,
+    ``weld``) are that function instead.
+    """
+    package = Path(igljoin.__file__).parent
+    names = {p.stem for p in package.glob("*.py")} | {
+        p.parent.name for p in package.glob("*/__init__.py")
+    }
+    names -= {"__init__"}
+    shadowed = {n for n in names if callable(getattr(igljoin, n, None))}
+    assert shadowed == {"join", "clean", "weld"}
+    got = _loaded_after(
+        f"""
+        import types, igljoin
+        for name in {sorted(names - shadowed)!r}:
+            assert isinstance(getattr(igljoin, name), types.ModuleType), name
+        """
+    )
+    assert "numba" in got["loaded"]  # the probe imported the solver's modules for real
+
+
 def test_every_public_name_resolves():
     names = set(igljoin.__all__)
     assert names <= set(dir(igljoin))
