@@ -99,11 +99,12 @@ class Welded:
         ``V`` shape (n, 3), ``F`` shape (m, 3): host faces (split ones
         replaced by fans) first, then guest faces. Vertex attributes
         ``seam`` (bool), ``source`` and ``source_id`` (int, the columns of
-        :attr:`source`), ``strain`` and ``displacement`` (float; 0 on host
-        vertices, the guest's values on shared seam vertices); face
-        attributes ``label`` (int), ``source_face`` (int: original host face
-        a fan face was split from, or guest face id) and ``area_ratio``
-        (float; 1.0 on host faces).
+        :attr:`source`) and, when given to :func:`weld`, ``strain`` and
+        ``displacement`` (float; 0 on host vertices, the guest's values on
+        shared seam vertices); face attributes ``label`` (int),
+        ``source_face`` (int: original host face a fan face was split from,
+        or guest face id) and, when given, ``area_ratio`` (float; 1.0 on
+        host faces). ``JoinResult.merged`` always has all of them.
     source : ndarray of int64, shape (n, 2)
         For each merged vertex ``(source, id)``: ``(0, host vertex id)`` or
         ``(1, guest vertex id)`` (ids of ``JoinResult.host`` and
