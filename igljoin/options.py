@@ -145,6 +145,11 @@ def _short(value: Any) -> str:
     return text if len(text) <= 60 else f"{text[:40]}... ({len(text)} characters)"
 
 
+def _default(name: str) -> Any:
+    """The default value of the option ``name`` (for an error message)."""
+    return next(f.default for f in fields(JoinOptions) if f.name == name)
+
+
 @_accepts_old_names
 @dataclass(frozen=True)
 class JoinOptions:
@@ -308,7 +313,10 @@ class JoinOptions:
             self._number("time_limit", low=0.0, strict=True)
         acc = self.acceleration
         if isinstance(acc, bool) or not isinstance(acc, (int, np.integer)) or not 0 <= acc <= 50:
-            raise OptionsError(f"acceleration={acc!r} must be an integer from 0 to 50 (default 5)")
+            raise OptionsError(
+                f"acceleration={_short(acc)} must be an integer from 0 to 50 (the default is "
+                f"{_default('acceleration')})"
+            )
         it = self.max_iterations
         if (
             isinstance(it, bool)
@@ -317,7 +325,7 @@ class JoinOptions:
         ):
             raise OptionsError(
                 f"max_iterations={_short(it)} must be an integer from 1 to {MAX_ITERATIONS:,} "
-                "(the default is 2000)"
+                f"(the default is {_default('max_iterations')})"
             )
         for name, allowed in (
             ("smooth_mode", ("band", "robust", "paper")),
@@ -397,10 +405,9 @@ class JoinOptions:
             bound = f"> {low:g}" if strict else f">= {low:g}"
             if high is not None:
                 bound = f"from {low:g} to {high:g}"
-            default = next(f.default for f in fields(self) if f.name == name)
             raise OptionsError(
                 f"{name}={_short(getattr(self, name))} is out of range; it must be a finite "
-                f"number {bound} (the default is {default})"
+                f"number {bound} (the default is {_default(name)})"
                 + (f"; {WEIGHT_RANGE_WHY}" if high is not None else "")
             )
         object.__setattr__(self, name, value)

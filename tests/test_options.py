@@ -190,6 +190,12 @@ def test_make_validates():
         JoinOptions.make({"acceleration": 99})
 
 
+def test_the_acceleration_message_names_the_real_default():
+    default = next(f.default for f in dataclasses.fields(JoinOptions) if f.name == "acceleration")
+    with pytest.raises(OptionsError, match=f"the default is {default}\\)$"):
+        JoinOptions(acceleration=-1)
+
+
 def test_replace_validates_and_keeps_the_rest():
     opt = JoinOptions(smooth=False, stiffness=[1.0, 3.0])
     new = opt.replace(energy_tolerance=1e-3)
