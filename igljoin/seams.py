@@ -73,7 +73,20 @@ def host_list(host: Any) -> list | None:
 
 
 def combined_host(hosts: list[Mesh]) -> tuple[Mesh, np.ndarray]:
-    """Several host meshes as one mesh (vertices and faces concatenated) and vertex offsets."""
+    """Several host meshes as one mesh (vertices and faces concatenated) and vertex offsets.
+
+    Parameters
+    ----------
+    hosts : list of Mesh
+        ``h`` meshes.
+
+    Returns
+    -------
+    combined : Mesh
+        Vertices and faces of the meshes in order, faces renumbered.
+    offsets : ndarray of int64, shape (h + 1,)
+        Mesh ``i`` has the combined vertices ``offsets[i]:offsets[i + 1]``.
+    """
     offsets = np.cumsum([0] + [h.n_vertices for h in hosts]).astype(np.int64)
     V = np.vstack([h.V for h in hosts])
     F = np.vstack([h.F + o for h, o in zip(hosts, offsets)])
@@ -134,8 +147,28 @@ def check_disjoint(pairs: list[SeamPair]) -> None:
         )
 
 
-def combined_correspondence(parts: list[Correspondence], host_sizes: list[int]):
-    """The correspondences of consecutive seams as one (see ``JoinResult.correspondence``)."""
+def combined_correspondence(parts: list[Correspondence], host_sizes: list[int]) -> Correspondence:
+    """The correspondences of consecutive seams as one (see ``JoinResult.correspondence``).
+
+    Parameters
+    ----------
+    parts : list of Correspondence
+        One per seam, each made on the guest refined by the ones before it
+        (:func:`correspond_seams`).
+    host_sizes : list of int
+        The number of host curve vertices of each seam (``k_i``).
+
+    Returns
+    -------
+    Correspondence
+        ``V``, ``F`` of the last part (the guest refined on every seam),
+        ``face_parent`` composed back to the guest as given, and the per-seam
+        arrays concatenated seam after seam: ``seam``, ``seam_t``,
+        ``host_edge_t`` shape (s,), ``targets`` shape (s, 3), ``host_hit``
+        shape (k,) indexing the concatenated ``seam``, ``host_edge`` shape
+        (s,) indexing the concatenated host curves (``s``, ``k`` the totals).
+        A single part is returned as it is.
+    """
     if len(parts) == 1:
         return parts[0]
     last = parts[-1]
@@ -208,6 +241,22 @@ def host_neighbourhood(
     faces — on the host's own vertex ids. Smaller hosts, and
     curves selected by loop or start vertex (which need all of the host's
     boundary), get ``None``.
+
+    Parameters
+    ----------
+    host : Mesh
+        A single host mesh.
+    host_curve, seams
+        As given to :class:`igljoin.JoinSolver` (``seams`` ``None`` for a
+        single seam given by ``host_curve``).
+    max_faces : int
+        Hosts of at most this many faces are used whole.
+
+    Returns
+    -------
+    Mesh or None
+        ``V`` the host's own (n_h, 3) array, ``F`` shape (m', 3) the faces
+        near the curves; ``None`` to use the whole host.
     """
     specs = [host_curve] if seams is None else [
         item[-2] if isinstance(item, (tuple, list)) and len(item) in (2, 3) else None
@@ -241,6 +290,17 @@ def check_host(host: Mesh, near: Mesh | None) -> None:
     error always names the right elements and a fan cut at the
     neighbourhood's rim is never reported. Defects farther away do not
     enter the join and stay in the host as given.
+
+    Parameters
+    ----------
+    host : Mesh
+    near : Mesh or None
+        :func:`host_neighbourhood` of ``host``.
+
+    Raises
+    ------
+    MeshError
+        The message of the whole host's :func:`igljoin.validate.check_surface`.
     """
     if near is None:
         check_surface(host, "host")
@@ -265,8 +325,6 @@ def select_near(host: Mesh, near: Mesh, spec: Any, name: str) -> SelectedCurve:
     except CurveError:
         return select_curve(host, spec, name=name)
     return SelectedCurve(hc.indices, hc.closed, -1, hc.forward)
-
-
 
 
 def load_hosts(host: Any) -> tuple[list[Mesh], Mesh, np.ndarray, bool]:
@@ -294,9 +352,7 @@ def load_hosts(host: Any) -> tuple[list[Mesh], Mesh, np.ndarray, bool]:
             one = _renamed(one, "host")
         return [one], one, np.array([0, one.n_vertices], dtype=np.int64), False
     meshes = [as_mesh(h, f"host[{i}]") for i, h in enumerate(hosts)]
-    meshes = [
-        Mesh(h.V, h.F, name=f"host[{i}]") if h.name == "mesh" else h for i, h in enumerate(meshes)
-    ]
+    meshes = [_renamed(h, f"host[{i}]") if h.name == "mesh" else h for i, h in enumerate(meshes)]
     combined, offsets = combined_host(meshes)
     return meshes, combined, offsets, True
 
