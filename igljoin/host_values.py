@@ -65,7 +65,11 @@ class HostValues:
         return self._kept(key, lambda: seam_frames(V, F, curve.indices, curve.closed).inward)
 
     def dihedral(self, curve: np.ndarray) -> np.ndarray:
-        """The host's dihedral angles near ``curve`` (``metrics.host_dihedral_angles``)."""
+        """The host's dihedral angles (degrees) near ``curve``, shape (p,).
+
+        ``curve`` is an index array, shape (k,) (one curve, or several
+        concatenated); see :func:`igljoin.metrics.host_dihedral_angles`.
+        """
         key = ("dihedral", np.asarray(curve).tobytes())
         V, F = self.measured.V, self.measured.F
         return self._kept(key, lambda: host_dihedral_angles(V, F, curve))

@@ -85,7 +85,24 @@ def interpolate_frames(
 
 
 def join_angles(options: JoinOptions, k: int) -> list:
-    """``join_angle`` per seam of ``k`` (None: the default smooth join)."""
+    """``join_angle`` per seam of ``k`` (None: the default smooth join).
+
+    Parameters
+    ----------
+    options : JoinOptions
+    k : int
+        Number of seams.
+
+    Returns
+    -------
+    list of float or None
+        ``k`` angles in degrees.
+
+    Raises
+    ------
+    OptionsError
+        If ``join_angle`` is a list whose length is not ``k``.
+    """
     angle = options.join_angle
     if not isinstance(angle, tuple):
         return [angle] * k
@@ -116,6 +133,7 @@ def seam_bands(
     Returns
     -------
     list of float
+        One band width per seam, in mesh units.
     """
     return [
         options.smooth_band

@@ -26,11 +26,24 @@ __all__ = ["SELF_INTERSECTION_RINGS", "guest_maps", "weld_metrics", "combined_ga
 
 
 def guest_maps(rest_V: np.ndarray, guest: Mesh) -> tuple[np.ndarray, np.ndarray]:
-    """Per-vertex strain and non-rigid displacement of the deformed guest, shape (n_g,) each.
+    """Per-vertex strain and non-rigid displacement of the deformed guest.
 
     Taken from the guest's ``strain`` and ``displacement`` vertex attributes
-    when it has them, else measured against the rest positions ``rest_V``
-    (n_g, 3) as the join measures them.
+    when it has them, else measured against the rest positions as the join
+    measures them.
+
+    Parameters
+    ----------
+    rest_V : ndarray, shape (n_g, 3)
+        The guest at rest (same vertices and faces as ``guest``).
+    guest : Mesh
+        The deformed guest.
+
+    Returns
+    -------
+    strain, displacement : ndarray, shape (n_g,)
+        :func:`igljoin.metrics.vertex_strain` and
+        :func:`igljoin.metrics.nonrigid_displacement`.
     """
     attrs = guest.vertex_attributes
     X, F = guest.V, guest.F
@@ -120,7 +133,21 @@ def weld_metrics(
 
 
 def combined_gap(gaps: list[dict], counts: list[int]) -> dict:
-    """Seam gap over several seams: largest maximum, mean over all seam vertices."""
+    """Seam gap over several seams: largest maximum, mean over all seam vertices.
+
+    Parameters
+    ----------
+    gaps : list of dict
+        Each seam's :func:`igljoin.metrics.seam_gap` (``max``, ``mean``,
+        ``relative_max``, ``relative_mean``).
+    counts : list of int
+        Each seam's number of guest seam vertices (the weights of the means).
+
+    Returns
+    -------
+    dict
+        The same keys over all seams; a single seam's dict as it is.
+    """
     if len(gaps) == 1:
         return gaps[0]
     w = np.asarray(counts, dtype=np.float64) / float(sum(counts))
