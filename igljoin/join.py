@@ -222,8 +222,6 @@ class JoinSolver:
             opt, c, self.E, self.guest, host, self.host_values, curves, self.parts, self.bands
         )
         self.built, self.terms = built, built.terms
-        self.smooth_keep_degs, self.crease_removed = built.smooth_keep_degs, built.crease_removed
-        self.smooth_keep_deg = max(self.smooth_keep_degs, default=0.0)
         self._rest_fits = {}  # the rest guest's band fits along its seams (see join_result)
         t2 = time.perf_counter()
         # §4.5: the seam vertices fixed in one factorization

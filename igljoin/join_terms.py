@@ -40,15 +40,12 @@ class JoinTerms:
     terms : list of Term
         Shape, stretch, then one smooth-join term per seam (each if its
         weight is positive).
-    smooth_keep_degs : list of float
-        Per smooth-join term: the crease (degrees) it tolerates.
     crease_removed : list of ndarray
         Per band smooth-join term, shape (s,): the crease (degrees) it
         removes at each seam vertex (empty for the other modes).
     """
 
     terms: list[Term]
-    smooth_keep_degs: list[float]
     crease_removed: list[np.ndarray]
 
 
@@ -221,25 +218,23 @@ def _frame_term(
     part: Correspondence,
     curve: SelectedCurve,
     host: Mesh,
-) -> tuple[SmoothJoinTerm, float]:
-    """The paper's or the robust smooth-join term of one seam, and the crease it tolerates."""
+) -> SmoothJoinTerm:
+    """The paper's or the robust smooth-join term of one seam."""
     opt = options
     mean_edge = mean_segment(host.V[curve.indices], curve.closed)
     radius = None if opt.smooth_mode == "paper" else opt.smooth_radius * mean_edge
     radius = radius or None
     frames = seam_frames(host.V, host.F, curve.indices, curve.closed, radius=radius)
     at_seam = interpolate_frames(frames, part.host_edge, part.host_edge_t, curve.closed)
-    tolerance = _smooth_keep_deg(opt, host, frames, curve)
-    term = SmoothJoinTerm(
+    return SmoothJoinTerm(
         corr.V,
         corr.F,
         part.seam,
         at_seam,
         opt.smooth_weight,
         opt.smooth_mode,
-        np.radians(tolerance),
+        np.radians(_smooth_keep_deg(opt, host, frames, curve)),
     )
-    return term, tolerance
 
 
 def build_terms(
@@ -286,7 +281,6 @@ def build_terms(
     if opt.stretch_weight > 0:
         k = edge_stiffness(E, c.F, *refined_stiffness(opt, guest.n_vertices, guest.n_faces, c))
         terms.append(StretchTerm(c.V, E, opt.stretch_weight * k))
-    keep: list[float] = []
     removed: list[np.ndarray] = []
     if opt.smooth and opt.smooth_weight > 0 and opt.smooth_mode == "band":
         angles = join_angles(opt, len(curves))
@@ -294,10 +288,6 @@ def build_terms(
             term, crease = _band_term(opt, c, part, hc, host, host_values, band, angle)
             terms.append(term)
             removed.append(crease)
-            keep.append(float(opt.smooth_keep_deg or 0.0))
     elif opt.smooth and opt.smooth_weight > 0:
-        for hc, part in zip(curves, parts):
-            term, tolerance = _frame_term(opt, c, part, hc, host)
-            terms.append(term)
-            keep.append(tolerance)
-    return JoinTerms(terms, keep, removed)
+        terms.extend(_frame_term(opt, c, part, hc, host) for hc, part in zip(curves, parts))
+    return JoinTerms(terms, removed)
