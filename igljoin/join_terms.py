@@ -49,6 +49,18 @@ class JoinTerms:
     crease_removed: list[np.ndarray]
 
 
+def _at_points(A: np.ndarray, edge: np.ndarray, t: np.ndarray, closed: bool) -> np.ndarray:
+    """Per-vertex values ``A`` (k, ...) of a curve, linearly interpolated at points on its edges.
+
+    ``edge`` (s,) is each point's curve edge (from vertex ``edge`` to the
+    next), ``t`` (s,) its position along it in ``[0, 1]``; returns (s, ...).
+    """
+    k = len(A)
+    nxt = (edge + 1) % k if closed else np.minimum(edge + 1, k - 1)
+    w = t.reshape(-1, *([1] * (A.ndim - 1)))
+    return A[edge] * (1.0 - w) + A[nxt] * w
+
+
 def interpolate_frames(
     frames: SeamFrames, edge: np.ndarray, t: np.ndarray, closed: bool
 ) -> SeamFrames:
@@ -69,11 +81,9 @@ def interpolate_frames(
     SeamFrames
         Shape (s, 3) each.
     """
-    k = len(frames.normal)
-    nxt = (edge + 1) % k if closed else np.minimum(edge + 1, k - 1)
 
     def lerp(A):
-        return unit(A[edge] * (1.0 - t)[:, None] + A[nxt] * t[:, None])
+        return unit(_at_points(A, edge, t, closed))
 
     normal = lerp(frames.normal)
     inward = lerp(frames.inward)
@@ -165,11 +175,8 @@ def _band_term(
     edge, t = part.host_edge, part.host_edge_t
     at_seam = interpolate_frames(host_fit.frames, edge, t, curve.closed)
     guest_fit = band_fit(corr.V, corr.F, part.seam, curve.closed, band)
-    k = len(curve.indices)
-    nxt = (edge + 1) % k if curve.closed else np.minimum(edge + 1, k - 1)
-    P = host.V[curve.indices]
-    targets = P[edge] * (1.0 - t)[:, None] + P[nxt] * t[:, None]
-    host_se = host_fit.slope_error[edge] * (1.0 - t) + host_fit.slope_error[nxt] * t
+    targets = _at_points(host.V[curve.indices], edge, t, curve.closed)
+    host_se = _at_points(host_fit.slope_error, edge, t, curve.closed)
     kept, removed = band_targets.kept_elevation(
         at_seam,
         guest_fit.frames.inward,
