@@ -52,7 +52,7 @@ class SeamPair:
     guest_curve : SelectedCurve
         On the guest, paired: guest vertex 0 corresponds to host vertex 0.
     pairing : dict
-        Rigid-fit residuals of the start search (see :func:`pair_curves`).
+        Rigid-fit residuals of the start search (see :func:`igljoin.correspond.pair_curves`).
     """
 
     host_index: int
