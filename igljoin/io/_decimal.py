@@ -2,20 +2,25 @@
 
 The ASCII STL reader hands each block of facets here first. :func:`parse_facets`
 walks the bytes once: it checks that the tokens are exactly
-``facet normal a b c outer loop vertex x y z (x3) endloop endfacet`` and
-converts the nine coordinates of each facet to float64. It gives up (and the
-reader falls back to its other parsers, which give every message) on
-anything else: other keywords or letter case, a coordinate that is not a
-plain decimal (``nan``, ``inf``, ``1_0``, more than 19 significant digits), a
-subnormal or overflowing value.
+``facet normal a b c outer loop vertex x y z (x3) endloop endfacet``, with
+``outer``, each ``vertex`` and ``endloop`` first on their lines (as the
+line-by-line reference parser reads them), and converts the nine coordinates
+of each facet to float64. It gives up (and the reader falls back to its other
+parsers, which give every message) on anything else: other keywords or letter
+case, other whitespace than space, tab and ``\\n``, a coordinate that is not
+a plain decimal (``nan``, ``inf``, ``1_0``, more than 19 significant digits).
+Subnormal and overflowing values are converted by ``float``.
 
 Conversion of ``w * 10**q`` (``w`` the up to 19 significant digits as an
 integer) is exact where ``w < 2**53`` and ``|q| <= 22`` (both are exact
 doubles and IEEE arithmetic rounds once). Otherwise ``w`` is multiplied by a
-128-bit truncation of ``5**q``; the true product lies within ``w`` units of the
-computed 192-bit one, so the rounding of the top 54 bits is decided unless the
-bits below lie at a rounding boundary (about one number in 2**64): such
-numbers are handed back and converted by Python's ``float`` instead.
+128-bit truncation of ``5**q`` (exact for ``0 <= q <= 55``): the top 64 bits of
+the product decide the rounding unless the bits below the rounding bit lie
+at a rounding boundary, where the full 192-bit product is formed; the true
+product lies less than ``2**64`` above it, so only a product at a boundary
+within that margin stays open (a dyadic value ``w / 5**-q * 2**q`` is then
+converted exactly; anything else, about one random decimal in ``2**54``, is
+handed back and converted by Python's ``float``).
 """
 
 from __future__ import annotations

@@ -2,9 +2,10 @@
 
 Binary STL is read with one :func:`numpy.fromfile` after its size is checked
 against the triangle count of its header. ASCII STL is streamed block by
-block: blocks of plainly written facets are parsed with vectorised numpy,
-others by the line-by-line reference parser below (every check and message).
-Corners with equal coordinates are merged into one vertex.
+block: blocks of plainly written facets are parsed by the compiled parser of
+:mod:`igljoin.io._decimal` (large blocks) or with vectorised numpy, others by
+the line-by-line reference parser below (every check and message). Corners
+with equal coordinates are merged into one vertex.
 """
 
 from __future__ import annotations
