@@ -1,5 +1,8 @@
 # The two commands a newcomer runs: `make demo` and `make test`.
 PYTHON ?= python3
+# test processes: one per core (pytest-xdist), each test file in one process (its module
+# fixtures are built once); TEST_WORKERS=0 runs the suite in one process
+TEST_WORKERS ?= auto
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
@@ -16,7 +19,7 @@ demo: $(STAMP)
 	$(VENV)/bin/igljoin demo --out out/demo
 
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 # a long hypothesis run (20,000 examples per fuzz test; make test runs 700 each)
 fuzz: $(STAMP)

@@ -88,6 +88,8 @@ def split_lines(data: bytes) -> list[bytes]:
 
 
 def _line_breaks(data: bytes) -> int:
+    if b"\r" not in data:  # the common case: one pass
+        return data.count(b"\n")
     return data.count(b"\n") + data.count(b"\r") - data.count(b"\r\n")
 
 
@@ -307,18 +309,18 @@ def merge_vertices(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     word = np.uint64 if P.dtype == np.float64 else np.uint32
     K = P.view(word).astype(np.uint64, copy=False)
     h = _mix(_mix(_mix(K[:, 0]) ^ K[:, 1]) ^ K[:, 2])
-    order = np.argsort(h, kind="stable")
+    order = np.argsort(h)  # not stable (faster): each group's first index is found below
     hs = h[order]
     new = np.empty(order.size, dtype=bool)
     new[:1] = True
     np.not_equal(hs[1:], hs[:-1], out=new[1:])
     group = np.cumsum(new) - 1
-    first = order[new]
+    first = np.minimum.reduceat(order, np.flatnonzero(new)) if order.size else order
     if not (K[first[group]] == K[order]).all():  # a hash collision: exact but slower
         _, first, inverse = np.unique(P, axis=0, return_index=True, return_inverse=True)
         group, order = inverse.reshape(-1), np.arange(P.shape[0])
     rank = np.empty(first.size, dtype=np.int64)
-    rank[np.argsort(first, kind="stable")] = np.arange(first.size)
+    rank[np.argsort(first)] = np.arange(first.size)  # distinct: any sort gives one order
     F = np.empty(P.shape[0], dtype=np.int64)
     F[order] = rank[group]
     V = np.empty((first.size, 3), dtype=np.float64)

@@ -2,9 +2,10 @@
 
 Binary STL is read with one :func:`numpy.fromfile` after its size is checked
 against the triangle count of its header. ASCII STL is streamed block by
-block: blocks of plainly written facets are parsed with vectorised numpy,
-others by the line-by-line reference parser below (every check and message).
-Corners with equal coordinates are merged into one vertex.
+block: blocks of plainly written facets are parsed by the compiled parser of
+:mod:`igljoin.io._decimal` (large blocks) or with vectorised numpy, others by
+the line-by-line reference parser below (every check and message). Corners
+with equal coordinates are merged into one vertex.
 """
 
 from __future__ import annotations
@@ -36,6 +37,9 @@ _FLOAT32_MAX = float(np.finfo(np.float32).max)
 _FACET = {0: b"facet", 1: b"normal", 5: b"outer", 6: b"loop", 7: b"vertex", 11: b"vertex"}
 _FACET |= {15: b"vertex", 19: b"endloop", 20: b"endfacet"}
 _COORDS = (8, 9, 10, 12, 13, 14, 16, 17, 18)
+#: Blocks of facets at least this long are parsed by the compiled parser
+#: (:mod:`igljoin.io._decimal`; importing numba costs more than it saves on small files).
+COMPILED_BYTES = 1 << 21
 
 
 class _State:
@@ -126,9 +130,28 @@ def _slow(path: Path, state: _State, first: int, data: bytes) -> None:
     state.n_corners += len(corners)
 
 
+def _compiled(path: Path, state: _State, first: int, data: bytes, start: int, stop: int) -> bool:
+    """Parse plain facets in ``data[start:stop]`` with the compiled parser."""
+    if state.in_loop or b"vertex" in data[:start]:
+        return False
+    from . import _decimal  # numba: imported on first use
+
+    parsed = _decimal.parse_facets(data, start, stop)
+    if parsed is None:
+        return False
+    corners, lines = parsed
+    if state.n_corners + corners.shape[0] > 3 * max_elements():
+        return False
+    _slow(path, state, first, data[:start])
+    state.corners.append(corners)
+    state.n_corners += corners.shape[0]
+    _slow(path, state, first + data.count(b"\n", 0, start) + lines, data[stop:])
+    return True
+
+
 def _fast(path: Path, state: _State, first: int, data: bytes) -> bool:
     """Parse the plain facets of a block (its head and tail lines go to the reference)."""
-    if state.in_loop or has_odd_space(data):
+    if state.in_loop:
         return False
     start = data.find(b"facet")
     stop = data.rfind(b"endfacet")
@@ -137,6 +160,10 @@ def _fast(path: Path, state: _State, first: int, data: bytes) -> bool:
     start = data.rfind(b"\n", 0, start) + 1
     stop = data.find(b"\n", stop)
     stop = len(data) if stop < 0 else stop + 1
+    if stop - start >= COMPILED_BYTES and _compiled(path, state, first, data, start, stop):
+        return True
+    if has_odd_space(data):
+        return False
     head, body, tail = data[:start], data[start:stop], data[stop:]
     if b"vertex" in head or b"\r" in body:
         return False
