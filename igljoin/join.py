@@ -22,7 +22,7 @@ import numpy as np
 from . import seams as seams_
 from .errors import OptionsError
 from .host_values import HostValues
-from .join_terms import build_terms, seam_bands
+from .join_terms import TermInputs, build_terms, seam_bands
 from .measure_join import join_result
 from .mesh import Mesh, as_mesh
 from .options import JoinOptions
@@ -219,7 +219,9 @@ class JoinSolver:
         curves = [p.host_curve for p in self.pairs]
         self.bands = seam_bands(opt, host, c, curves, self.parts)
         built = build_terms(
-            opt, c, self.E, self.guest, host, self.host_values, curves, self.parts, self.bands
+            TermInputs(
+                opt, c, self.E, self.guest, host, self.host_values, curves, self.parts, self.bands
+            )
         )
         self.built, self.terms = built, built.terms
         self._rest_fits = {}  # the rest guest's band fits along its seams (see join_result)

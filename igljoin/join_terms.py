@@ -26,9 +26,17 @@ from .options import JoinOptions
 from .polyline import mean_segment
 from .seam_geometry import SeamGeometry
 from .stiffness import refined_stiffness
-from .terms import ShapeTerm, SmoothJoinTerm, StretchTerm, Term, edge_stiffness
+from .terms import ShapeTerm, SmoothJoinTerm, StretchTerm, Term, check_order, edge_stiffness
 
-__all__ = ["JoinTerms", "build_terms", "join_angles", "seam_bands", "interpolate_frames"]
+__all__ = [
+    "JoinTerms",
+    "TermInputs",
+    "TERMS",
+    "build_terms",
+    "join_angles",
+    "seam_bands",
+    "interpolate_frames",
+]
 
 
 @dataclass
@@ -244,20 +252,11 @@ def _frame_term(
     )
 
 
-def build_terms(
-    options: JoinOptions,
-    corr: Correspondence,
-    E: np.ndarray,
-    guest: Mesh,
-    host: Mesh,
-    host_values: HostValues,
-    curves: list,
-    parts: list,
-    bands: list[float],
-) -> JoinTerms:
-    """The terms of a join (§4.2–4.4) over its refined guest.
+@dataclass(frozen=True)
+class TermInputs:
+    """What the term builders of :data:`TERMS` read.
 
-    Parameters
+    Attributes
     ----------
     options : JoinOptions
     corr : Correspondence
@@ -276,25 +275,79 @@ def build_terms(
         Each seam's own correspondence.
     bands : list of float
         Each seam's band width (:func:`seam_bands`).
+    """
+
+    options: JoinOptions
+    corr: Correspondence
+    E: np.ndarray
+    guest: Mesh
+    host: Mesh
+    host_values: HostValues
+    curves: list
+    parts: list
+    bands: list
+
+
+def _shape_terms(inputs: TermInputs) -> list[tuple[Term, np.ndarray | None]]:
+    """§4.2: the (rotation-aware) Laplacian shape term."""
+    opt, c = inputs.options, inputs.corr
+    term = ShapeTerm(c.V, c.F, opt.shape_weight, opt.laplacian, opt.rotation_aware, E=inputs.E)
+    return [(term, None)]
+
+
+def _stretch_terms(inputs: TermInputs) -> list[tuple[Term, np.ndarray | None]]:
+    """§4.3: minimum stretching with the edge stiffness ``k_ij``."""
+    opt, c, guest = inputs.options, inputs.corr, inputs.guest
+    k = edge_stiffness(inputs.E, c.F, *refined_stiffness(opt, guest.n_vertices, guest.n_faces, c))
+    return [(StretchTerm(c.V, inputs.E, opt.stretch_weight * k), None)]
+
+
+def _smooth_terms(inputs: TermInputs) -> list[tuple[Term, np.ndarray | None]]:
+    """§4.4: one smooth-join term per seam (band, paper or robust), if ``smooth`` is on."""
+    opt, c = inputs.options, inputs.corr
+    seams = list(zip(inputs.curves, inputs.parts))
+    if not opt.smooth:
+        return []
+    if opt.smooth_mode != "band":
+        return [(_frame_term(opt, c, part, hc, inputs.host), None) for hc, part in seams]
+    angles = join_angles(opt, len(seams))
+    return [
+        _band_term(opt, c, part, hc, inputs.host, inputs.host_values, band, angle)
+        for (hc, part), band, angle in zip(seams, inputs.bands, angles)
+    ]
+
+
+#: The terms of a join, in the order their local steps run, each built when the
+#: weight option beside it is positive. A new term is one class in
+#: :mod:`igljoin.terms`, one weight in :class:`~igljoin.options.JoinOptions` and
+#: one row here. Order matters where a term reads what another's local step
+#: sets: the stretch term reads the rotations the shape term fits
+#: (:attr:`igljoin.terms.Term.reads_rotations`), so the shape term comes first;
+#: :func:`igljoin.terms.check_order` refuses a list that breaks this.
+TERMS = (
+    ("shape_weight", _shape_terms),
+    ("stretch_weight", _stretch_terms),
+    ("smooth_weight", _smooth_terms),
+)
+
+
+def build_terms(inputs: TermInputs) -> JoinTerms:
+    """The terms of a join (§4.2–4.4) over its refined guest, in the order of :data:`TERMS`.
+
+    Parameters
+    ----------
+    inputs : TermInputs
 
     Returns
     -------
     JoinTerms
     """
-    opt, c = options, corr
-    terms: list[Term] = []
-    if opt.shape_weight > 0:
-        terms.append(ShapeTerm(c.V, c.F, opt.shape_weight, opt.laplacian, opt.rotation_aware, E=E))
-    if opt.stretch_weight > 0:
-        k = edge_stiffness(E, c.F, *refined_stiffness(opt, guest.n_vertices, guest.n_faces, c))
-        terms.append(StretchTerm(c.V, E, opt.stretch_weight * k))
-    removed: list[np.ndarray] = []
-    if opt.smooth and opt.smooth_weight > 0 and opt.smooth_mode == "band":
-        angles = join_angles(opt, len(curves))
-        for hc, part, band, angle in zip(curves, parts, bands, angles):
-            term, crease = _band_term(opt, c, part, hc, host, host_values, band, angle)
-            terms.append(term)
-            removed.append(crease)
-    elif opt.smooth and opt.smooth_weight > 0:
-        terms.extend(_frame_term(opt, c, part, hc, host) for hc, part in zip(curves, parts))
-    return JoinTerms(terms, removed)
+    built = [
+        made
+        for weight, make in TERMS
+        if getattr(inputs.options, weight) > 0
+        for made in make(inputs)
+    ]
+    terms = [term for term, _ in built]
+    check_order(terms)
+    return JoinTerms(terms, [removed for _, removed in built if removed is not None])

@@ -37,6 +37,7 @@ ROTATION_REGULARISATION = 0.1
 ROWS_PER_BAND_ROW = 2.5
 
 __all__ = [
+    "check_order",
     "Term",
     "LocalState",
     "ShapeTerm",
@@ -89,6 +90,14 @@ class Term(ABC):
     #: projection and so is stiff in only some directions.
     preconditioner_scale: float = 1.0
 
+    #: The term's local step fits per-vertex rotations and stores them in
+    #: ``LocalState.rotations`` for the terms after it.
+    sets_rotations: bool = False
+
+    #: The term's local step reads ``LocalState.rotations`` when a term before it
+    #: set them (and works without them when none did).
+    reads_rotations: bool = False
+
     @abstractmethod
     def target(self, state: LocalState) -> np.ndarray:
         """Target of ``K X``, shape (rows, 3), for the current iterate."""
@@ -135,6 +144,34 @@ class Term(ABC):
         if KtW is None:
             KtW = self._KtW = sp.csr_matrix(self.K.T @ sp.diags(self.weights))
         return e, KtW @ r
+
+
+def check_order(terms: list[Term]) -> None:
+    """Refuse a term list in which a term reads rotations a later term sets.
+
+    The solver runs the local steps in list order, sharing one
+    :class:`LocalState`; a term that reads ``state.rotations`` must come after
+    the term that fits them, or it would read the previous iterate's.
+
+    Parameters
+    ----------
+    terms : list of Term
+
+    Raises
+    ------
+    ValueError
+        Naming the two terms, if a rotation-reading term precedes a
+        rotation-setting one (an internal ordering error, not a user's).
+    """
+    reader = next((t for t in terms if t.reads_rotations), None)
+    if reader is None:
+        return
+    for setter in terms[terms.index(reader) + 1 :]:
+        if setter.sets_rotations:
+            raise ValueError(
+                f"the {reader.name} term reads the rotations the {setter.name} term sets, "
+                "so it must come after it in the term list"
+            )
 
 
 def _edge_vectors(
@@ -259,6 +296,7 @@ class ShapeTerm(Term):
         self.Lt = sp.csr_matrix(self.L.T)
         self.delta = self.L @ V0
         self.rotation_aware = rotation_aware
+        self.sets_rotations = bool(rotation_aware)
         self._K = None
         self.compiled = False
         if not rotation_aware:
@@ -475,6 +513,9 @@ class StretchTerm(Term):
     #: 0.2 (with the smooth join's 0.5) needed the fewest iterations on the paper's
     #: samples of the values tried (0.1–0.5; docs/benchmarks.md).
     preconditioner_scale = 0.2
+
+    #: A collapsed edge keeps its rest direction turned by its first vertex's rotation.
+    reads_rotations = True
 
     def __init__(self, V0, E, stiffness, compiled=True):
         self.E = E
