@@ -185,7 +185,7 @@ def _newton(solver, res) -> dict:
         X0,
         solver.corr.targets,
         max_iterations=opt.max_iterations,
-        tolerance=opt.tolerance,
+        tolerance=opt.energy_tolerance,
         scale=solver.guest_mean_edge,
         acceleration=opt.acceleration,
         model=model,
