@@ -59,7 +59,9 @@ def test_same_minimum_as_a_long_plain_run_in_fewer_iterations(scenario):
     solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
     ls, opt = solver.solver, solver.options
     X0, bc = solver.initial_guess(), solver.corr.targets
-    settings = dict(tolerance=opt.energy_tolerance, scale=solver.guest_mean_edge, max_iterations=2000)
+    settings = dict(
+        tolerance=opt.energy_tolerance, scale=solver.guest_mean_edge, max_iterations=2000
+    )
     default = ls.run(X0, bc, acceleration=opt.acceleration, **settings)
     model = newton.NewtonModel(ls)
     fast = ls.run(X0, bc, acceleration=opt.acceleration, model=model, **settings)
