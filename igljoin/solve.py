@@ -275,7 +275,8 @@ class LocalGlobalSolver:
             Called as ``callback(iteration, energy)`` after every iteration.
         model : optional
             A replacement of the initial inverse Hessian ``P_ff⁻¹`` of the
-            quasi-Newton steps (e.g. :class:`igljoin.newton.NewtonModel`):
+            quasi-Newton steps (e.g. :class:`igljoin.newton.NewtonModel` or
+            :class:`igljoin.twolevel.TwoLevelModel`):
             an object with ``refresh(state, iteration) -> bool`` (called
             before every iteration with the current local state; ``True``
             when the model changed, which drops the quasi-Newton memory) and

@@ -1,0 +1,239 @@
+"""A two-level preconditioner: the factored ``P`` plus a coarse Gauss–Newton correction.
+
+The quasi-Newton iteration of :mod:`igljoin.solve` starts every step from
+``P⁻¹`` (``P = Σ c_t K_tᵀ W_t K_t``, one factorization, the same for the
+three coordinates). ``P`` does not know that a neighbourhood may turn at
+little cost — the shape term refits its rotation — so the soft bending and
+turning modes take many iterations, more the finer the mesh. The
+Gauss–Newton model with the rotations eliminated (:mod:`igljoin.newton`)
+knows them but costs 10–17× ``P``'s factorization at full size.
+
+This module keeps ``P`` on the fine mesh and resolves the model on a coarse
+space only: the free vertices are grouped into connected clusters of about
+``cluster_size`` vertices (:func:`clusters`), each with its six rigid
+motions — three translations and three infinitesimal rotations about its
+centroid at the current positions (:func:`rigid_prolongation`, ``A`` of
+shape (3 m, 6 a)). The coarse matrix ``A_c = Aᵀ H A`` is the model ``H``
+projected onto them, computed from the model's factored form
+(:func:`igljoin.newton.gauss_newton_factors`) without assembling ``H``, and
+factored once (6 a unknowns, a few thousand). The initial inverse Hessian
+of the quasi-Newton steps becomes
+
+* additive: ``P⁻¹ + A A_c⁻¹ Aᵀ``, or
+* balancing (``balancing=True``): ``C + (I − C H) P⁻¹ (I − H C)`` with
+  ``C = A A_c⁻¹ Aᵀ``, exact on the coarse space (two products with ``H``
+  per step, in factored form).
+
+Both are symmetric positive definite, so the quasi-Newton steps stay
+descent directions and the line search keeps the energy from rising.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+from .linsolve import FixedQuadratic
+from .newton import dofs, gauss_newton_factors
+
+__all__ = ["clusters", "rigid_prolongation", "TwoLevelModel"]
+
+# relative ridge added to the coarse matrix: a cluster of three nearly collinear vertices
+# has a nearly free rotation about their line; 1e-10 of the mean diagonal keeps its
+# factorization finite without changing any other coarse mode measurably
+_RIDGE = 1e-10
+
+
+def clusters(X: np.ndarray, graph: sp.spmatrix, size: int) -> np.ndarray:
+    """Connected clusters of about ``size`` vertices: graph Voronoi cells of grid seeds.
+
+    The vertices are binned in a cubic grid whose cells hold about ``size``
+    of them each; the vertex nearest each occupied cell's mean is a seed,
+    and every vertex joins the seed nearest along the graph (edge lengths
+    ``|x_i − x_j|``), so every cluster is connected.
+
+    Parameters
+    ----------
+    X : ndarray, shape (m, 3)
+        Positions.
+    graph : sparse matrix, shape (m, m)
+        Adjacency: any symmetric non-zero pattern (the diagonal is ignored).
+    size : int
+        Vertices per cluster aimed at.
+
+    Returns
+    -------
+    ndarray of int64, shape (m,)
+        Cluster of every vertex, 0 .. a − 1.
+    """
+    X = np.asarray(X, dtype=np.float64)
+    m = len(X)
+    size = max(int(size), 1)
+    G = sp.coo_matrix(graph)
+    keep = G.row != G.col
+    r, c = G.row[keep], G.col[keep]
+    W = sp.csr_matrix((np.linalg.norm(X[r] - X[c], axis=1) + 1e-300, (r, c)), shape=(m, m))
+    lo = X.min(axis=0)
+    h = (float(np.max(X.max(axis=0) - lo)) + 1e-300) / max(m / size, 1.0) ** (1.0 / 3.0)
+    for _ in range(8):
+        # a surface fills few cells of a volume grid: shrink the cell until they hold
+        # about size vertices (the count per cell scales with the cell's area)
+        keys = np.floor((X - lo) / h).astype(np.int64)
+        _, cell = np.unique(keys, axis=0, return_inverse=True)
+        cell = cell.ravel()
+        ratio = m / (int(cell.max()) + 1) / size
+        if 0.7 < ratio < 1.4:
+            break
+        h /= ratio**0.5
+    count = np.bincount(cell).astype(np.float64)
+    mean = np.stack([np.bincount(cell, X[:, d]) for d in range(3)], 1) / count[:, None]
+    offset = X - mean[cell]
+    order = np.lexsort((np.einsum("ij,ij->i", offset, offset), cell))
+    seeds = order[np.r_[True, cell[order][1:] != cell[order][:-1]]]
+    _, _, source = csgraph.dijkstra(
+        W, directed=False, indices=seeds, min_only=True, return_predecessors=True
+    )
+    lost = source < 0
+    if lost.any():
+        # parts of the graph no seed reaches: one cluster per connected part
+        _, part = csgraph.connected_components(W[lost][:, lost], directed=False)
+        source = source.copy()
+        source[lost] = m + part
+    _, labels = np.unique(source, return_inverse=True)
+    return labels.astype(np.int64).ravel()
+
+
+def rigid_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
+    """The six rigid motions of every cluster, shape (3 m, 6 a), vertex-major rows.
+
+    Columns ``6 j .. 6 j + 2`` translate cluster ``j``; ``6 j + 3 .. 6 j + 5``
+    turn it infinitesimally about its centroid ``c_j`` (``θ × (x − c_j)``),
+    divided by the cluster's radius so that all columns have the size of a
+    unit translation.
+
+    Parameters
+    ----------
+    X : ndarray, shape (m, 3)
+    labels : ndarray of int64, shape (m,)
+        Cluster of every vertex (:func:`clusters`).
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (3 m, 6 a)
+    """
+    m = len(X)
+    a = int(labels.max()) + 1
+    count = np.bincount(labels, minlength=a).astype(np.float64)
+    centre = np.stack([np.bincount(labels, X[:, d], minlength=a) for d in range(3)], 1)
+    r = X - (centre / count[:, None])[labels]
+    radius = np.sqrt(np.bincount(labels, np.einsum("ij,ij->i", r, r), minlength=a) / count)
+    r = r / np.maximum(radius[labels], 1e-300)[:, None]
+    blocks = np.zeros((m, 3, 6))
+    blocks[:, 0, 0] = blocks[:, 1, 1] = blocks[:, 2, 2] = 1.0
+    # θ × r = −[r]× θ
+    blocks[:, 0, 4], blocks[:, 0, 5] = r[:, 2], -r[:, 1]
+    blocks[:, 1, 3], blocks[:, 1, 5] = -r[:, 2], r[:, 0]
+    blocks[:, 2, 3], blocks[:, 2, 4] = r[:, 1], -r[:, 0]
+    rows = np.broadcast_to(
+        3 * np.arange(m)[:, None, None] + np.arange(3)[None, :, None], blocks.shape
+    )
+    cols = np.broadcast_to(6 * labels[:, None, None] + np.arange(6)[None, None, :], blocks.shape)
+    return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * m, 6 * a))
+
+
+class TwoLevelModel:
+    """``P⁻¹`` with a coarse Gauss–Newton correction, as the quasi-Newton initial inverse Hessian.
+
+    Passed as ``model`` to :meth:`igljoin.solve.LocalGlobalSolver.run`. At
+    the first iteration it groups the free vertices into clusters, builds
+    their rigid motions ``A`` at the current positions and factors
+    ``A_c = Aᵀ H A`` (``H``: the Gauss–Newton model at the current
+    iterate); ``P``'s factorization is the solver's own, reused.
+
+    Parameters
+    ----------
+    solver : LocalGlobalSolver
+        Supplies the terms, the fixed vertices, ``P``'s factorization and
+        the backend.
+    cluster_size : int
+        Free vertices per cluster aimed at (coarse unknowns: 6 per cluster).
+    balancing : bool
+        The balancing form ``C + (I − C H) P⁻¹ (I − H C)`` instead of the
+        additive ``P⁻¹ + C``: fewer iterations, two products with ``H`` more
+        per step.
+
+    Attributes
+    ----------
+    labels : ndarray of int64, shape (n_free,)
+        Cluster of every free vertex (after the first refresh).
+    factorizations : int
+        Coarse factorizations made.
+    seconds : dict
+        ``clusters``, ``model`` (the factored Gauss–Newton model), ``coarse``
+        (``Aᵀ H A``) and ``factor`` times.
+    """
+
+    def __init__(self, solver, cluster_size: int = 20, balancing: bool = False):
+        self.solver = solver
+        self.cluster_size = int(cluster_size)
+        self.balancing = bool(balancing)
+        self.free_dofs = dofs(solver.free)
+        self.labels = None
+        self.factorizations = 0
+        self.seconds = {"clusters": 0.0, "model": 0.0, "coarse": 0.0, "factor": 0.0}
+
+    def refresh(self, state, iteration: int) -> bool:
+        """Build the coarse correction at ``state`` the first time; ``True`` then."""
+        if self.labels is not None:
+            return False
+        ls = self.solver
+        t0 = time.perf_counter()
+        X = state.X[ls.free]
+        self.labels = clusters(X, ls.P[ls.free][:, ls.free], self.cluster_size)
+        t1 = time.perf_counter()
+        self.factors = gauss_newton_factors(ls.terms, state, ls.n)
+        t2 = time.perf_counter()
+        A = rigid_prolongation(X, self.labels).tocoo()
+        # the same columns on all 3n coordinates (zero rows at the fixed vertices)
+        full = sp.csr_matrix((A.data, (self.free_dofs[A.row], A.col)), shape=(3 * ls.n, A.shape[1]))
+        Ac = sp.csr_matrix((A.shape[1], A.shape[1]))
+        for J, w, sign in self.factors:
+            JA = J @ full
+            Ac = Ac + sign * (JA.T @ sp.diags(w) @ JA)
+        Ac = Ac + _RIDGE * Ac.diagonal().mean() * sp.eye(A.shape[1])
+        t3 = time.perf_counter()
+        self.A = A.tocsr()
+        self.At = sp.csr_matrix(self.A.T)
+        self.coarse_factor = FixedQuadratic(Ac, np.zeros(0, dtype=np.int64), ls.linear_solver)
+        self.factorizations += 1
+        t4 = time.perf_counter()
+        for key, dt in zip(self.seconds, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
+            self.seconds[key] += dt
+        return True
+
+    def _coarse(self, v: np.ndarray) -> np.ndarray:
+        """``A A_c⁻¹ Aᵀ v`` for ``v`` of shape (3 n_free,)."""
+        return self.A @ self.coarse_factor.solve_free((self.At @ v)[:, None])[:, 0]
+
+    def _model(self, v: np.ndarray) -> np.ndarray:
+        """``H_ff v`` for ``v`` of shape (3 n_free,), from the factored model."""
+        full = np.zeros(3 * self.solver.n)
+        full[self.free_dofs] = v
+        out = np.zeros_like(full)
+        for J, w, sign in self.factors:
+            out += sign * (J.T @ (w * (J @ full)))
+        return out[self.free_dofs]
+
+    def solve_free(self, v: np.ndarray) -> np.ndarray:
+        """The preconditioner's inverse on ``v`` (n_free, 3); returns shape (n_free, 3)."""
+        fine = self.solver.factor.solve_free
+        v = np.ascontiguousarray(v, dtype=np.float64)
+        flat = v.reshape(-1)
+        if not self.balancing:
+            return fine(v) + self._coarse(flat).reshape(v.shape)
+        c = self._coarse(flat)
+        z = fine((flat - self._model(c)).reshape(v.shape)).reshape(-1)
+        return (c + z - self._coarse(self._model(z))).reshape(v.shape)

@@ -1,0 +1,94 @@
+"""The two-level preconditioner: P plus a coarse Gauss–Newton correction (igljoin.twolevel)."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+import igljoin
+from igljoin import newton, phantoms, twolevel
+
+
+def _solver(scenario, length="equal"):
+    s = phantoms.paper_sample(scenario, length, resolution=0.5)
+    return igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+
+
+@pytest.fixture(scope="module")
+def patch():
+    return _solver("partial_patch")
+
+
+def test_clusters_are_connected_and_about_the_size_asked(patch):
+    ls = patch.solver
+    X = patch.initial_guess()[ls.free]
+    G = ls.P[ls.free][:, ls.free]
+    for size in (5, 20):
+        labels = twolevel.clusters(X, G, size)
+        assert labels.shape == (len(X),) and labels.min() == 0
+        counts = np.bincount(labels)
+        assert counts.min() >= 1
+        # the grid is tuned until a cell holds 0.7-1.4 x size vertices on average; graph
+        # Voronoi cells of its seeds vary around that (a factor 2 either way is generous)
+        assert 0.5 * size <= np.mean(counts) <= 2.0 * size
+        for j in range(len(counts)):
+            inside = np.flatnonzero(labels == j)
+            parts, _ = csgraph.connected_components(G[inside][:, inside], directed=False)
+            assert parts == 1
+
+
+def test_prolongation_spans_each_clusters_rigid_motions():
+    rng = np.random.default_rng(1)
+    X = rng.standard_normal((12, 3))
+    labels = np.repeat([0, 1, 2], 4)
+    A = twolevel.rigid_prolongation(X, labels).toarray()
+    assert A.shape == (36, 18)
+    # a different small rigid motion of every cluster lies in the span of its six columns
+    u = np.zeros_like(X)
+    for j in range(3):
+        at = labels == j
+        theta, t = rng.standard_normal(3), rng.standard_normal(3)
+        u[at] = np.cross(theta, X[at]) + t
+    coef, *_ = np.linalg.lstsq(A, u.reshape(-1), rcond=None)
+    # exact up to rounding of a least-squares fit of 36 values (1e-12 relative)
+    assert np.linalg.norm(A @ coef - u.reshape(-1)) <= 1e-12 * np.linalg.norm(u)
+    # and nothing else: 6 independent columns per cluster
+    assert np.linalg.matrix_rank(A) == 18
+
+
+def test_coarse_matrix_is_the_projected_model(patch):
+    ls = patch.solver
+    state, _, _ = ls.local(patch.initial_guess())
+    model = twolevel.TwoLevelModel(ls)
+    assert model.refresh(state, 1) and not model.refresh(state, 2)
+    H = newton.gauss_newton(ls.terms, state, ls.n)
+    free = newton.dofs(ls.free)
+    expected = (model.A.T @ H[free][:, free] @ model.A).toarray()
+    got = model.coarse_factor.Qff.toarray()
+    # the factored products against the assembled matrix: rounding (1e-12 of the largest
+    # entry) plus the ridge of 1e-10 of the mean diagonal
+    assert np.abs(got - expected).max() <= 1e-9 * np.abs(expected).max()
+    assert sp.issparse(model.A) and model.factorizations == 1
+
+
+@pytest.mark.parametrize("scenario", ["partial_patch", "end_to_end"])
+@pytest.mark.parametrize("balancing", [False, True])
+def test_same_minimum_as_a_long_plain_run(scenario, balancing):
+    solver = _solver(scenario)
+    ls, opt = solver.solver, solver.options
+    X0, bc = solver.initial_guess(), solver.corr.targets
+    settings = dict(tolerance=opt.energy_tolerance, scale=solver.guest_mean_edge)
+    default = ls.run(X0, bc, acceleration=opt.acceleration, max_iterations=2000, **settings)
+    model = twolevel.TwoLevelModel(ls, cluster_size=10, balancing=balancing)
+    fast = ls.run(X0, bc, acceleration=opt.acceleration, max_iterations=2000, model=model,
+                  **settings)  # fmt: skip
+    plain = ls.run(X0, bc, acceleration=0, max_iterations=30000, tolerance=1e-13,
+                   scale=solver.guest_mean_edge)  # fmt: skip
+    gap = (fast.energy[-1] - plain.energy[-1]) / plain.energy[-1]
+    # the project's convergence requirement: within 1e-6 (relative) of the long plain run
+    assert fast.converged and gap <= 1e-6
+    assert model.factorizations == 1
+    # the energy never rises (the line search accepts only decreasing steps)
+    assert np.all(np.diff(fast.energy) <= 0.0)
+    # the point of the coarse space: fewer iterations than L-BFGS on P alone
+    assert fast.iterations < default.iterations
