@@ -253,6 +253,7 @@ _CHANGED = {
     "snap_fraction": 0.3,
     "initial_guess": "rigid",
     "acceleration": 0,
+    "preconditioner": "two-level",
     "linear_solver": "igl",
 }
 
