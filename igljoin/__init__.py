@@ -68,7 +68,7 @@ _SUBMODULES = (
     "errors", "frames", "host_values", "io", "join_terms", "kernels", "linsolve", "measure",
     "measure_join", "mesh", "metrics", "newton", "options", "outputs", "phantoms", "pipeline",
     "plain", "polyline", "quality", "result", "rotations", "seam_geometry", "seams", "solve",
-    "spec", "start", "stiffness", "terms", "topology", "validate", "viz",
+    "spec", "start", "stiffness", "terms", "topology", "twolevel", "validate", "viz",
 )  # fmt: skip
 
 __all__ = [
