@@ -87,7 +87,8 @@ def split_lines(data: bytes) -> list[bytes]:
     return lines
 
 
-def _line_breaks(data: bytes) -> int:
+def line_breaks(data: bytes) -> int:
+    """Line breaks in ``data`` (``\\n``, ``\\r\\n`` or ``\\r``), as :func:`split_lines` splits."""
     if b"\r" not in data:  # the common case: one pass
         return data.count(b"\n")
     return data.count(b"\n") + data.count(b"\r") - data.count(b"\r\n")
@@ -102,6 +103,57 @@ def _last_break(data: bytes, after: bytes | None) -> int:
             if end >= 0:
                 return end + 1
     return max(data.rfind(b"\n"), data.rfind(b"\r", 0, len(data) - 1)) + 1
+
+
+class LineTooLong(Exception):
+    """Raised by :func:`text_blocks`: a line longer than :data:`MAX_LINE_BYTES` follows the
+    blocks yielded so far (the caller, who counts lines, names it: :func:`long_line_error`)."""
+
+
+def long_line_error(path: Path, fmt: str, number: int) -> MeshReadError:
+    return error(
+        path,
+        f"line {number} is longer than {MAX_LINE_BYTES:,} bytes",
+        f"the file is corrupt or not an {fmt} file; re-export it",
+    )
+
+
+def text_blocks(
+    path: Path,
+    fmt: str,
+    *,
+    after: bytes | None = None,
+    on_binary: Callable[[], MeshReadError] | None = None,
+) -> Iterator[bytes]:
+    """Read a text mesh file block by block, each block ending at a line break.
+
+    Like :func:`text_chunks` without the line numbers (for a reader that
+    counts them itself); a line too long raises :class:`LineTooLong`.
+    """
+    carry = b""
+    with open(path, "rb") as fh:
+        while True:
+            block = fh.read(CHUNK_BYTES)
+            nul = block.find(b"\0")
+            if nul >= 0:  # the complete lines before it are still read (and checked) first
+                data = carry + block[:nul]
+                end = _last_break(data, None)
+                if end:
+                    yield data[:end]
+                raise (on_binary or (lambda: binary_text_error(path, fmt)))()
+            data = carry + block if carry else block
+            if not block:
+                if data:
+                    yield data
+                return
+            end = _last_break(data, after)
+            if end == 0:
+                if len(data) > MAX_LINE_BYTES:
+                    raise LineTooLong
+                carry = data
+                continue
+            chunk, carry = data[:end], data[end:]
+            yield chunk
 
 
 def text_chunks(
@@ -134,35 +186,12 @@ def text_chunks(
         error is raised.
     """
     number = 1
-    carry = b""
-    with open(path, "rb") as fh:
-        while True:
-            block = fh.read(CHUNK_BYTES)
-            nul = block.find(b"\0")
-            if nul >= 0:  # the complete lines before it are still read (and checked) first
-                data = carry + block[:nul]
-                end = _last_break(data, None)
-                if end:
-                    yield number, data[:end]
-                raise (on_binary or (lambda: binary_text_error(path, fmt)))()
-            data = carry + block if carry else block
-            if not block:
-                if data:
-                    yield number, data
-                return
-            end = _last_break(data, after)
-            if end == 0:
-                if len(data) > MAX_LINE_BYTES:
-                    raise error(
-                        path,
-                        f"line {number} is longer than {MAX_LINE_BYTES:,} bytes",
-                        f"the file is corrupt or not an {fmt} file; re-export it",
-                    )
-                carry = data
-                continue
-            chunk, carry = data[:end], data[end:]
+    try:
+        for chunk in text_blocks(path, fmt, after=after, on_binary=on_binary):
             yield number, chunk
-            number += _line_breaks(chunk)
+            number += line_breaks(chunk)
+    except LineTooLong:
+        raise long_line_error(path, fmt, number) from None
 
 
 def byte_table(chars: bytes) -> np.ndarray:

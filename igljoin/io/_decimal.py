@@ -233,7 +233,7 @@ SLOT = np.full(21, -1, dtype=np.int64)
 SLOT[[k for k, t in enumerate(LAYOUT) if t == "+"]] = np.arange(9)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)  # blocks are parsed on several threads at once
 def facets(b, i, n, out, retry, WORDS, LENGTHS, LINE_FIRST, SLOT, HI, LO, EX):
     """Parse the facets of ``b[i:n]`` into ``out`` (9 per facet); their number (-1: not
     plain facets) and the line breaks."""
