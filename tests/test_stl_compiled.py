@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import struct
+import threading
 
 import numpy as np
 import pytest
 
 from igljoin.errors import MeshReadError
-from igljoin.io import _decimal, read_mesh, stl
+from igljoin.io import _common, _decimal, read_mesh, stl
 
 
 def _facets(numbers: list[bytes]) -> bytes:
@@ -131,3 +132,103 @@ def test_messages_after_a_compiled_block_name_the_right_line(tmp_path, monkeypat
     monkeypatch.setattr(stl, "COMPILED_BYTES", 0)
     with pytest.raises(MeshReadError, match=r"line 23: 'vertex' outside a facet"):
         read_mesh(path)
+
+
+def _reference_outcome(path, monkeypatch):
+    """What the line-by-line reference parser gives: the mesh, or the error message."""
+    with monkeypatch.context() as m:
+        m.setattr(stl, "_fast", lambda *args: False)
+        return _outcome(path)
+
+
+def _outcome(path):
+    try:
+        mesh = read_mesh(path)
+    except MeshReadError as exc:
+        return str(exc)
+    return mesh.V, mesh.F
+
+
+def _many_blocks(monkeypatch, threads) -> list[str]:
+    """Blocks of a few facets each, all compiled, parsed on ``threads`` threads; the list
+    receives the name of the thread of each compiled parse."""
+    monkeypatch.setattr(_common, "CHUNK_BYTES", 4096)  # about ten facets a block
+    monkeypatch.setattr(stl, "COMPILED_BYTES", 0)
+    monkeypatch.setattr(stl, "THREADS", threads)
+    names = []
+    parse = _decimal.parse_facets
+
+    def counted(*args):
+        names.append(threading.current_thread().name)
+        return parse(*args)
+
+    monkeypatch.setattr(_decimal, "parse_facets", counted)
+    return names
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_blocks_parsed_on_threads_give_the_reference_mesh(tmp_path, monkeypatch, threads):
+    finite = [x for x in _decimals(400, seed=2) if np.isfinite(float(x))]
+    pool = [finite[3 * k : 3 * k + 3] for k in range(50)]  # 50 corners, shared by facets
+    rng = np.random.default_rng(3)
+    numbers = [x for k in rng.integers(0, len(pool), 3 * 100) for x in pool[k]]
+    path = tmp_path / "t.stl"
+    path.write_bytes(b"solid t\n" + _facets(numbers) + b"endsolid t\n")
+    names = _many_blocks(monkeypatch, threads)
+    V, F = _outcome(path)
+    # many blocks, all compiled, on pool threads unless one thread is asked for
+    assert len(names) > 5
+    assert all(name.startswith("igljoin-stl") == (threads > 1) for name in names)
+    want_V, want_F = _reference_outcome(path, monkeypatch)
+    assert F.shape[0] == 100 and V.shape[0] <= 50
+    # bit for bit, the same vertices in the same order
+    assert np.array_equal(V.view(np.uint64), want_V.view(np.uint64))
+    assert np.array_equal(F, want_F)
+
+
+BAD_TAILS = {
+    # a facet of two vertices: the compiled parser hands its block back, the reference reports
+    "two-vertices": b"facet normal 0 0 1\n  outer loop\n" + b"    vertex 0 0 0\n" * 2
+    + b"  endloop\nendfacet\n",
+    "vertex-outside": b"  vertex 1 2 3\n",
+    "bad-number": b"facet normal 0 0 1\n  outer loop\n    vertex 0 0 x\n",
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("bad", sorted(BAD_TAILS))
+def test_a_bad_block_after_parallel_ones_names_the_right_line(tmp_path, monkeypatch, threads, bad):
+    facet = _facets([b"1", b"2", b"3", b"4", b"5", b"6", b"7", b"8", b"9.5"])
+    path = tmp_path / "t.stl"
+    path.write_bytes(b"solid t\n" + facet * 60 + BAD_TAILS[bad] + facet * 60 + b"endsolid t\n")
+    _many_blocks(monkeypatch, threads)
+    message = _outcome(path)
+    assert message == _reference_outcome(path, monkeypatch)
+    # after the header line and 60 facets of 7 lines, on the bad tail's line the message names
+    offset = {"two-vertices": 4, "vertex-outside": 0, "bad-number": 2}[bad]
+    assert f"line {2 + 60 * 7 + offset}:" in message
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_errors_met_while_reading_ahead_come_in_file_order(tmp_path, monkeypatch, threads):
+    facet = _facets([b"1", b"2", b"3", b"4", b"5", b"6", b"7", b"8", b"9.5"])
+    path = tmp_path / "t.stl"
+    bad = b"  vertex 1 2 3\n"
+    # a bad line, then (blocks later, already read when that block is parsed) a NUL byte
+    path.write_bytes(b"solid t\n" + facet * 30 + bad + facet * 30 + b"\0" + facet)
+    _many_blocks(monkeypatch, threads)
+    assert f"line {2 + 30 * 7}: 'vertex' outside a facet" in _outcome(path)
+    # a line too long after compiled blocks: its number counts their lines
+    path.write_bytes(b"solid t\n" + facet * 30 + b"x" * 20000 + b"\n" + facet + b"endsolid t\n")
+    monkeypatch.setattr(_common, "MAX_LINE_BYTES", 8192)
+    assert f"line {2 + 30 * 7} is longer than 8,192 bytes" in _outcome(path)
+
+
+def test_a_carriage_return_before_the_facets_counts_as_the_reference_counts(tmp_path, monkeypatch):
+    facet = _facets([b"1", b"2", b"3", b"4", b"5", b"6", b"7", b"8", b"9.5"])
+    path = tmp_path / "t.stl"
+    path.write_bytes(b"solid t\r\r\n" + facet * 3 + b"  vertex 1 2 3\nendsolid t\n")
+    monkeypatch.setattr(stl, "COMPILED_BYTES", 0)
+    message = _outcome(path)
+    assert message == _reference_outcome(path, monkeypatch)
+    assert "line 24: 'vertex' outside a facet" in message  # 'solid t', '', 3 facets of 7 lines

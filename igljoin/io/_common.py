@@ -87,7 +87,8 @@ def split_lines(data: bytes) -> list[bytes]:
     return lines
 
 
-def _line_breaks(data: bytes) -> int:
+def line_breaks(data: bytes) -> int:
+    """Line breaks in ``data`` (``\\n``, ``\\r\\n`` or ``\\r``), as :func:`split_lines` splits."""
     if b"\r" not in data:  # the common case: one pass
         return data.count(b"\n")
     return data.count(b"\n") + data.count(b"\r") - data.count(b"\r\n")
@@ -102,6 +103,57 @@ def _last_break(data: bytes, after: bytes | None) -> int:
             if end >= 0:
                 return end + 1
     return max(data.rfind(b"\n"), data.rfind(b"\r", 0, len(data) - 1)) + 1
+
+
+class LineTooLong(Exception):
+    """Raised by :func:`text_blocks`: a line longer than :data:`MAX_LINE_BYTES` follows the
+    blocks yielded so far (the caller, who counts lines, names it: :func:`long_line_error`)."""
+
+
+def long_line_error(path: Path, fmt: str, number: int) -> MeshReadError:
+    return error(
+        path,
+        f"line {number} is longer than {MAX_LINE_BYTES:,} bytes",
+        f"the file is corrupt or not an {fmt} file; re-export it",
+    )
+
+
+def text_blocks(
+    path: Path,
+    fmt: str,
+    *,
+    after: bytes | None = None,
+    on_binary: Callable[[], MeshReadError] | None = None,
+) -> Iterator[bytes]:
+    """Read a text mesh file block by block, each block ending at a line break.
+
+    Like :func:`text_chunks` without the line numbers (for a reader that
+    counts them itself); a line too long raises :class:`LineTooLong`.
+    """
+    carry = b""
+    with open(path, "rb") as fh:
+        while True:
+            block = fh.read(CHUNK_BYTES)
+            nul = block.find(b"\0")
+            if nul >= 0:  # the complete lines before it are still read (and checked) first
+                data = carry + block[:nul]
+                end = _last_break(data, None)
+                if end:
+                    yield data[:end]
+                raise (on_binary or (lambda: binary_text_error(path, fmt)))()
+            data = carry + block if carry else block
+            if not block:
+                if data:
+                    yield data
+                return
+            end = _last_break(data, after)
+            if end == 0:
+                if len(data) > MAX_LINE_BYTES:
+                    raise LineTooLong
+                carry = data
+                continue
+            chunk, carry = data[:end], data[end:]
+            yield chunk
 
 
 def text_chunks(
@@ -134,35 +186,12 @@ def text_chunks(
         error is raised.
     """
     number = 1
-    carry = b""
-    with open(path, "rb") as fh:
-        while True:
-            block = fh.read(CHUNK_BYTES)
-            nul = block.find(b"\0")
-            if nul >= 0:  # the complete lines before it are still read (and checked) first
-                data = carry + block[:nul]
-                end = _last_break(data, None)
-                if end:
-                    yield number, data[:end]
-                raise (on_binary or (lambda: binary_text_error(path, fmt)))()
-            data = carry + block if carry else block
-            if not block:
-                if data:
-                    yield number, data
-                return
-            end = _last_break(data, after)
-            if end == 0:
-                if len(data) > MAX_LINE_BYTES:
-                    raise error(
-                        path,
-                        f"line {number} is longer than {MAX_LINE_BYTES:,} bytes",
-                        f"the file is corrupt or not an {fmt} file; re-export it",
-                    )
-                carry = data
-                continue
-            chunk, carry = data[:end], data[end:]
+    try:
+        for chunk in text_blocks(path, fmt, after=after, on_binary=on_binary):
             yield number, chunk
-            number += _line_breaks(chunk)
+            number += line_breaks(chunk)
+    except LineTooLong:
+        raise long_line_error(path, fmt, number) from None
 
 
 def byte_table(chars: bytes) -> np.ndarray:
@@ -301,9 +330,10 @@ def merge_vertices(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Notes
     -----
-    Positions are grouped by sorting a 64-bit hash of their bits; every group
-    is then checked for exact equality, and the rare hash collision falls back
-    to :func:`numpy.unique` (about three times slower).
+    Positions are grouped by sorting a 64-bit hash of their bits; the result
+    is then checked for exact equality (every corner equals the vertex it
+    was given), and the rare hash collision falls back to
+    :func:`numpy.unique` (about three times slower).
     """
     P = np.ascontiguousarray(P + P.dtype.type(0))  # -0.0 + 0.0 == +0.0: one bit pattern
     word = np.uint64 if P.dtype == np.float64 else np.uint32
@@ -316,15 +346,20 @@ def merge_vertices(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     np.not_equal(hs[1:], hs[:-1], out=new[1:])
     group = np.cumsum(new) - 1
     first = np.minimum.reduceat(order, np.flatnonzero(new)) if order.size else order
-    if not (K[first[group]] == K[order]).all():  # a hash collision: exact but slower
-        _, first, inverse = np.unique(P, axis=0, return_index=True, return_inverse=True)
-        group, order = inverse.reshape(-1), np.arange(P.shape[0])
+    by_first = np.argsort(first)  # distinct: any sort gives one order
     rank = np.empty(first.size, dtype=np.int64)
-    rank[np.argsort(first)] = np.arange(first.size)  # distinct: any sort gives one order
+    rank[by_first] = np.arange(first.size)
     F = np.empty(P.shape[0], dtype=np.int64)
     F[order] = rank[group]
-    V = np.empty((first.size, 3), dtype=np.float64)
-    V[rank] = P[first]
+    kept = first[by_first]  # the row of P that each vertex comes from
+    # np.take along axis 0 gathers rows much faster than fancy indexing
+    if not (np.take(np.take(K, kept, axis=0), F, axis=0) == K).all():  # a hash collision
+        _, kept, inverse = np.unique(P, axis=0, return_index=True, return_inverse=True)
+        by_first = np.argsort(kept)
+        rank = np.empty(kept.size, dtype=np.int64)
+        rank[by_first] = np.arange(kept.size)
+        F, kept = rank[inverse.reshape(-1)], kept[by_first]
+    V = np.take(P, kept, axis=0).astype(np.float64, copy=False)
     return V, F.reshape(-1, 3)
 
 

@@ -64,6 +64,8 @@ def _power_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.array(hi, dtype=np.uint64), np.array(lo, dtype=np.uint64), np.array(ex, np.int64)
 
 
+# The compiled functions read this module's tables as constants (numba freezes global arrays
+# when it compiles): passed as arguments, each would cost reference counting per number.
 HI, LO, EX = _power_table()
 
 u64 = np.uint64
@@ -92,8 +94,8 @@ def mul(a, b):
     return high, low
 
 
-@nb.njit(cache=True)
-def convert(w, q, negative, HI, LO, EX):
+@nb.njit(cache=True, inline="always")
+def convert(w, q, negative):
     """``(-1)**negative * w * 10**q`` correctly rounded, and whether that was decided."""
     if w == u64(0):
         return (-0.0 if negative else 0.0), True
@@ -173,7 +175,7 @@ def digits(b, i, n, w, kept):
 
 
 @nb.njit(cache=True, inline="always")
-def number(b, i, n, HI, LO, EX):
+def number(b, i, n):
     """Parse the plain decimal at ``b[i:]``; (value, decided, index after it, ok)."""
     negative = b[i] == 45
     if b[i] == 45 or b[i] == 43:  # - +
@@ -207,7 +209,7 @@ def number(b, i, n, HI, LO, EX):
         q += sign * e
     if i < n and not (b[i] == 32 or b[i] == 9 or b[i] == 10):
         return 0.0, False, i, False
-    x, decided = convert(w, q, negative, HI, LO, EX)
+    x, decided = convert(w, q, negative)
     return x, decided, i, True
 
 
@@ -233,8 +235,8 @@ SLOT = np.full(21, -1, dtype=np.int64)
 SLOT[[k for k, t in enumerate(LAYOUT) if t == "+"]] = np.arange(9)
 
 
-@nb.njit(cache=True)
-def facets(b, i, n, out, retry, WORDS, LENGTHS, LINE_FIRST, SLOT, HI, LO, EX):
+@nb.njit(cache=True, nogil=True)  # blocks are parsed on several threads at once
+def facets(b, i, n, out, retry):
     """Parse the facets of ``b[i:n]`` into ``out`` (9 per facet); their number (-1: not
     plain facets) and the line breaks."""
     t = 0  # the token's place in its facet
@@ -271,7 +273,7 @@ def facets(b, i, n, out, retry, WORDS, LENGTHS, LINE_FIRST, SLOT, HI, LO, EX):
                 return -1, 0
             at = 9 * count + SLOT[t]
             first = i
-            x, decided, i, ok = number(b, i, n, HI, LO, EX)
+            x, decided, i, ok = number(b, i, n)
             if not ok:
                 return -1, 0
             out[at] = x
@@ -313,7 +315,7 @@ def parse_facets(data: bytes, start: int, stop: int) -> tuple[np.ndarray, int] |
     b = np.frombuffer(data, dtype=np.uint8)
     out = np.empty(9 * ((stop - start) // 40 + 1))  # a facet takes more than 40 bytes
     retry = np.zeros(1 + 3 * RETRIES, dtype=np.int64)
-    count, lines = facets(b, start, stop, out, retry, WORDS, LENGTHS, LINE_FIRST, SLOT, HI, LO, EX)
+    count, lines = facets(b, start, stop, out, retry)
     if count < 0:
         return None
     for at, first, end in retry[1:].reshape(-1, 3)[: retry[0]]:

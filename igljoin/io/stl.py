@@ -4,29 +4,40 @@ Binary STL is read with one :func:`numpy.fromfile` after its size is checked
 against the triangle count of its header. ASCII STL is streamed block by
 block: blocks of plainly written facets are parsed by the compiled parser of
 :mod:`igljoin.io._decimal` (large blocks) or with vectorised numpy, others by
-the line-by-line reference parser below (every check and message). Corners
-with equal coordinates are merged into one vertex.
+the line-by-line reference parser below (every check and message). The
+compiled parser runs on up to :data:`THREADS` blocks at once, read ahead of
+the block being taken (so up to ``THREADS + 1`` blocks are held); results are
+taken, and blocks handed back to the other parsers, in file order, so every
+message and line number is the one a sequential read gives. Corners with
+equal coordinates are merged into one vertex.
 """
 
 from __future__ import annotations
 
+import os
+from collections import deque
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import MeshError
+from ..errors import MeshError, MeshReadError
 from ..mesh import Mesh
 from ._common import (
     FLOAT_BYTES,
     Arrays,
+    LineTooLong,
     error,
     guard_error,
     has_odd_space,
+    line_breaks,
+    long_line_error,
     max_elements,
     merge_vertices,
     parse_numbers,
     split_lines,
-    text_chunks,
+    text_blocks,
 )
 
 RECORD = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
@@ -40,6 +51,9 @@ _COORDS = (8, 9, 10, 12, 13, 14, 16, 17, 18)
 #: Blocks of facets at least this long are parsed by the compiled parser
 #: (:mod:`igljoin.io._decimal`; importing numba costs more than it saves on small files).
 COMPILED_BYTES = 1 << 21
+#: Threads parsing such blocks at once (the file is still read, and checked, in order;
+#: each started thread is joined before the reader returns).
+THREADS = min(4, os.cpu_count() or 1)
 
 
 class _State:
@@ -50,6 +64,8 @@ class _State:
         self.loop_size = 0
         self.loop_line = 0
         self.closed = False
+        #: Line breaks of the block just read, if the compiled parser counted them.
+        self.counted: int | None = None
 
 
 # --------------------------------------------------------------------------- binary
@@ -130,38 +146,63 @@ def _slow(path: Path, state: _State, first: int, data: bytes) -> None:
     state.n_corners += len(corners)
 
 
-def _compiled(path: Path, state: _State, first: int, data: bytes, start: int, stop: int) -> bool:
-    """Parse plain facets in ``data[start:stop]`` with the compiled parser."""
-    if state.in_loop or b"vertex" in data[:start]:
-        return False
+def _span(data: bytes) -> tuple[int, int] | None:
+    """The lines of ``data`` from its first ``facet`` to its last ``endfacet``, or None."""
+    start = data.find(b"facet")
+    stop = data.rfind(b"endfacet")
+    if start < 0 or stop < 0:
+        return None
+    start = data.rfind(b"\n", 0, start) + 1
+    stop = data.find(b"\n", stop)
+    return start, len(data) if stop < 0 else stop + 1
+
+
+def _compiled_job(data: bytes) -> Callable[[], tuple[int, int, tuple | None]] | None:
+    """The compiled parse of a block's facets, to run on any thread, or None if not tried.
+
+    The job returns ``(start, stop, parsed)``: the span it parsed and the result of
+    :func:`igljoin.io._decimal.parse_facets` (None: not plain facets).
+    """
+    span = _span(data)
+    if span is None or span[1] - span[0] < COMPILED_BYTES or b"vertex" in data[: span[0]]:
+        return None
     from . import _decimal  # numba: imported on first use
 
-    parsed = _decimal.parse_facets(data, start, stop)
+    start, stop = span
+    return lambda: (start, stop, _decimal.parse_facets(data, start, stop))
+
+
+def _compiled(path: Path, state: _State, first: int, data: bytes, job) -> bool:
+    """Take the compiled parse of a block (``job``: a future or a callable), or return False."""
+    start, stop, parsed = job.result() if isinstance(job, Future) else job()
     if parsed is None:
         return False
     corners, lines = parsed
     if state.n_corners + corners.shape[0] > 3 * max_elements():
         return False
-    _slow(path, state, first, data[:start])
+    head, tail = data[:start], data[stop:]
+    _slow(path, state, first, head)
     state.corners.append(corners)
     state.n_corners += corners.shape[0]
-    _slow(path, state, first + data.count(b"\n", 0, start) + lines, data[stop:])
+    head_lines = line_breaks(head)
+    _slow(path, state, first + head_lines + lines, tail)
+    state.counted = head_lines + lines + line_breaks(tail)
     return True
 
 
-def _fast(path: Path, state: _State, first: int, data: bytes) -> bool:
-    """Parse the plain facets of a block (its head and tail lines go to the reference)."""
+def _fast(path: Path, state: _State, first: int, data: bytes, job=None) -> bool:
+    """Parse the plain facets of a block (its head and tail lines go to the reference).
+
+    ``job`` is the block's compiled parse (:func:`_compiled_job`), if any.
+    """
     if state.in_loop:
         return False
-    start = data.find(b"facet")
-    stop = data.rfind(b"endfacet")
-    if start < 0 or stop < 0:
-        return False
-    start = data.rfind(b"\n", 0, start) + 1
-    stop = data.find(b"\n", stop)
-    stop = len(data) if stop < 0 else stop + 1
-    if stop - start >= COMPILED_BYTES and _compiled(path, state, first, data, start, stop):
+    if job is not None and _compiled(path, state, first, data, job):
         return True
+    span = _span(data)
+    if span is None:
+        return False
+    start, stop = span
     if has_odd_space(data):
         return False
     head, body, tail = data[:start], data[start:stop], data[stop:]
@@ -186,15 +227,53 @@ def _fast(path: Path, state: _State, first: int, data: bytes) -> bool:
     return True
 
 
+def _ahead(blocks: Iterator[bytes], pool: list) -> Iterator[tuple[bytes | None, object]]:
+    """The blocks with their compiled parses started ahead on up to :data:`THREADS` threads.
+
+    Yields ``(block, job)`` in file order (``job`` a future, or a callable when one thread
+    is used, or None); an error met while reading ahead is yielded as ``(None, error)``
+    once the blocks before it are done, so that every message comes in file order.
+    ``pool`` receives the thread pool once one is started (the caller shuts it down).
+    """
+    waiting: deque = deque()
+    try:
+        for data in blocks:
+            job = _compiled_job(data)
+            if job is not None and THREADS > 1:
+                if not pool:
+                    pool.append(ThreadPoolExecutor(THREADS, thread_name_prefix="igljoin-stl"))
+                job = pool[0].submit(job)
+            waiting.append((data, job))
+            while len(waiting) > THREADS:
+                yield waiting.popleft()
+    except (MeshReadError, LineTooLong) as exc:
+        waiting.append((None, exc))
+    while waiting:
+        yield waiting.popleft()
+
+
 def _read_ascii(path: Path, size: int) -> np.ndarray:
     state = _State()
 
     def on_binary() -> Exception:
         return _truncated_binary(path, size) if size >= HEADER_BYTES + 4 else _too_short(path, size)
 
-    for first, data in text_chunks(path, "STL", after=b"endfacet", on_binary=on_binary):
-        if not _fast(path, state, first, data):
-            _slow(path, state, first, data)
+    blocks = text_blocks(path, "STL", after=b"endfacet", on_binary=on_binary)
+    number = 1  # of the block's first line
+    pool: list[ThreadPoolExecutor] = []
+    try:
+        for data, job in _ahead(blocks, pool):
+            if data is None:
+                if isinstance(job, LineTooLong):
+                    raise long_line_error(path, "STL", number) from None
+                raise job
+            state.counted = None
+            if not _fast(path, state, number, data, job):
+                _slow(path, state, number, data)
+            number += line_breaks(data) if state.counted is None else state.counted
+    finally:
+        if pool:
+            pool[0].shutdown(wait=True, cancel_futures=True)
     if state.in_loop or not state.closed:
         raise error(
             path,
