@@ -18,6 +18,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import igljoin
+from igljoin import phantoms
 
 settings.register_profile(
     "ci", max_examples=700, deadline=None, suppress_health_check=[HealthCheck.too_slow]
@@ -33,6 +34,18 @@ EXAMPLES_RUN: collections.Counter = collections.Counter()
 #: Seconds one call may take on these tiny meshes (a join of ~100 vertices takes
 #: ~10-50 ms; the bound catches hangs, not slowness).
 CALL_BOUND = 10.0
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _kernels_loaded():
+    """Join once in every smooth mode before the examples: the first call of a process
+    compiles the numba kernels (or loads them from the cache), which takes seconds on a
+    fresh clone of a loaded machine and is not the hang CALL_BOUND is there to catch."""
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.3)
+    for mode in ("band", "robust", "paper"):
+        for acceleration in (0, 10):
+            igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve, smooth_mode=mode,
+                         acceleration=acceleration, max_iterations=3)  # fmt: skip
 
 
 def grid(nx: int, ny: int, heights: np.ndarray, jitter: np.ndarray) -> igljoin.Mesh:
