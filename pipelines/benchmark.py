@@ -925,6 +925,12 @@ def main(argv=None) -> int:
         kinds = set(args.only.split(","))
         specs = [sp for sp in specs if sp["kind"] in kinds]
         n_cases = 0
+        if not (out_dir / "benchmarks.json").is_file():
+            sys.exit(
+                f"--only replaces cases in {out_dir / 'benchmarks.json'}, which does not exist: "
+                "run the whole benchmark into that folder first, or give --out a folder that "
+                "holds one"
+            )
         previous = json.loads((out_dir / "benchmarks.json").read_text())
         kept_cases = [c for c in previous["cases"] if c["spec"]["kind"] not in kinds]
         results["throughput"] = previous.get("throughput")
