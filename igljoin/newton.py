@@ -177,13 +177,7 @@ def gauss_newton_factors(terms: list, state: LocalState, n: int) -> list:
 def gauss_newton(terms: list, state: LocalState, n: int) -> sp.csr_matrix:
     """Half the Gauss–Newton Hessian of the join energy at ``state.X``, shape (3n, 3n).
 
-    Parameters
-    ----------
-    terms : list of Term
-    state : LocalState
-        A local step's state at ``X`` (n, 3), with ``rotations`` fitted.
-    n : int
-        Number of vertices.
+    :func:`gauss_newton_factors` assembled; the parameters are its own.
 
     Returns
     -------
