@@ -1,11 +1,15 @@
-"""Output folders: igljoin never deletes or replaces what it did not write (real CLI)."""
+"""Output folders: igljoin never deletes or replaces what it did not write (the CLI).
+
+The command line runs in this process (``igljoin.cli.main``, see ``cli_run``):
+what is checked is the files left in the folders and the exit code and
+messages ``main`` gives, none of which needs a process of its own.
+"""
 
 from __future__ import annotations
 
 import hashlib
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -16,14 +20,13 @@ from igljoin.errors import OutputError
 from igljoin.outputs import MANIFEST, read_manifest
 from igljoin.pipeline import run_case
 
-IGLJOIN = Path(sys.executable).parent / "igljoin"
+from .cli_run import call
+
 JOIN_FILES = ["guest.ply", "guest.vtu", "merged.ply", "merged.vtu", "report.json", "timings.json"]
 
 
 def cli(*args) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [str(IGLJOIN), *map(str, args)], capture_output=True, text=True, timeout=300
-    )
+    return call(*args)
 
 
 def tree(root: Path) -> dict[str, str]:
