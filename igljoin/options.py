@@ -256,8 +256,8 @@ class JoinOptions:
         start of every solve. Same minimum; on patch-like guests of 10,000
         vertices and more it needs 2–4× fewer iterations and less time, on
         long tubes none fewer, and below a few thousand vertices its set-up
-        costs more than it saves (docs/limits.md). Used by the quasi-Newton
-        steps only (``acceleration`` > 0).
+        costs more than it saves (docs/limits.md). It preconditions the
+        quasi-Newton steps, so it needs ``acceleration`` > 0.
     linear_solver : {"auto", "igl", "cholespy"}
         Sparse Cholesky backend of the global step: libigl's
         ``min_quad_with_fixed`` (always available) or cholespy (the
@@ -328,6 +328,12 @@ class JoinOptions:
             raise OptionsError(
                 f"acceleration={_short(acc)} must be an integer from 0 to 50 (the default is "
                 f"{_default('acceleration')})"
+            )
+        if self.preconditioner == "two-level" and acc == 0:
+            raise OptionsError(
+                "preconditioner='two-level' preconditions the quasi-Newton steps, which "
+                "acceleration=0 turns off; give acceleration > 0 (the default is "
+                f"{_default('acceleration')}) or leave preconditioner at 'factored'"
             )
         it = self.max_iterations
         if (

@@ -38,6 +38,7 @@ def test_model_is_the_hessian_at_zero_residual(patch):
     # central differences are accurate to O(h²) ≈ 1e-10 relative; 1e-6 leaves room for
     # the rotation fit's own tolerance, while a wrong block would be off by O(1)
     assert np.linalg.norm(Hv - fd) <= 1e-6 * np.linalg.norm(fd)
+    # assembled from products JᵀWJ, symmetric up to the rounding of their sums
     assert abs(H - H.T).max() <= 1e-12 * abs(H).max()
 
 

@@ -113,3 +113,8 @@ def test_the_join_option_reaches_the_default_joins_minimum_without_refactoring_t
 def test_an_unknown_preconditioner_is_refused_with_the_choices():
     with pytest.raises(igljoin.OptionsError, match="preconditioner='multigrid' is not one of"):
         igljoin.JoinOptions(preconditioner="multigrid")
+
+
+def test_the_two_level_preconditioner_without_quasi_newton_steps_is_refused():
+    with pytest.raises(igljoin.OptionsError, match="give acceleration > 0"):
+        igljoin.JoinOptions(preconditioner="two-level", acceleration=0)
