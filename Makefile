@@ -33,6 +33,7 @@ bench: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check igljoin pipelines tests
+	$(VENV)/bin/ruff format --check igljoin pipelines tests
 
 clean:
 	rm -rf out .pytest_cache

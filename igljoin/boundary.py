@@ -310,9 +310,7 @@ def select_curve(mesh: Mesh, spec: Any, *, name: str = "curve") -> SelectedCurve
     if curve.indices is not None and any(
         v is not None for v in (curve.start, curve.end, curve.via, curve.loop)
     ):
-        raise CurveError(
-            f"{name}: give either the curve's indices or start/end/via/loop, not both"
-        )
+        raise CurveError(f"{name}: give either the curve's indices or start/end/via/loop, not both")
     if curve.loop is not None and (
         isinstance(curve.loop, bool) or not isinstance(curve.loop, (int, np.integer))
     ):

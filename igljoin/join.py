@@ -177,8 +177,10 @@ class JoinSolver:
         # §3: the hosts, and the curves of every seam selected and paired
         self.hosts, self.host, self.host_offsets, several = seams_.load_hosts(host)
         self.guest = _guest_mesh(guest) if guest_mesh is None else guest_mesh
-        self._host_near = None if several else seams_.host_neighbourhood(
-            self.host, host_curve, seams, HOST_CHECK_ALL_FACES
+        self._host_near = (
+            None
+            if several
+            else seams_.host_neighbourhood(self.host, host_curve, seams, HOST_CHECK_ALL_FACES)
         )
         if several:
             for h in self.hosts:

@@ -258,10 +258,14 @@ def host_neighbourhood(
         ``V`` the host's own (n_h, 3) array, ``F`` shape (m', 3) the faces
         near the curves; ``None`` to use the whole host.
     """
-    specs = [host_curve] if seams is None else [
-        item[-2] if isinstance(item, (tuple, list)) and len(item) in (2, 3) else None
-        for item in (seams if isinstance(seams, Sequence) else [])
-    ]
+    specs = (
+        [host_curve]
+        if seams is None
+        else [
+            item[-2] if isinstance(item, (tuple, list)) and len(item) in (2, 3) else None
+            for item in (seams if isinstance(seams, Sequence) else [])
+        ]
+    )
     curves = [_given_indices(spec) for spec in specs]
     n = host.n_vertices
     if (
@@ -273,8 +277,9 @@ def host_neighbourhood(
         return None
     P = host.V[np.concatenate(curves)]
     lo, hi = P.min(axis=0), P.max(axis=0)
-    longest = max(float(np.linalg.norm(np.diff(host.V[c], axis=0), axis=1).max(initial=0.0))
-                  for c in curves)
+    longest = max(
+        float(np.linalg.norm(np.diff(host.V[c], axis=0), axis=1).max(initial=0.0)) for c in curves
+    )
     pad = max(0.5 * float(np.linalg.norm(hi - lo)), _NEAR_EDGES * longest)
     near = ((host.V >= lo - pad) & (host.V <= hi + pad)).all(axis=1)
     F = host.F[near[host.F].any(axis=1)]
@@ -437,8 +442,7 @@ def select_seams(
         specs = seam_specs(seams, len(hosts), several_hosts)
         names = [(f"seams[{i}] host curve", f"seams[{i}] guest curve") for i in range(len(specs))]
     resolved = [
-        _select(hosts, host, offsets, near, guest, *spec, *name)
-        for spec, name in zip(specs, names)
+        _select(hosts, host, offsets, near, guest, *spec, *name) for spec, name in zip(specs, names)
     ]
     check_disjoint(resolved)
     check_seam_scales(host.V, guest.V, resolved)

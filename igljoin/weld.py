@@ -170,8 +170,10 @@ def _records(seams: Sequence[SeamRecord]) -> list[SeamRecord]:
     """``seams`` as a non-empty list of :class:`SeamRecord`, or a :class:`WeldError`."""
     if isinstance(seams, SeamRecord):
         seams = [seams]
-    if not isinstance(seams, Sequence) or not seams or not all(
-        isinstance(sm, SeamRecord) for sm in seams
+    if (
+        not isinstance(seams, Sequence)
+        or not seams
+        or not all(isinstance(sm, SeamRecord) for sm in seams)
     ):
         raise WeldError(
             f"weld: seams must be a non-empty list of igljoin.weld.SeamRecord, got "

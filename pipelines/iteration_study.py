@@ -67,8 +67,13 @@ def memory_study() -> list[dict]:
         for m in (10, 20, 40):
             _, res, sec = _join(s, acceleration=m)
             out.append(
-                {"case": f"{sc}/{ln}", "memory": m, "iterations": res.iterations,
-                 "energy": float(res.energy[-1]), "seconds": sec}
+                {
+                    "case": f"{sc}/{ln}",
+                    "memory": m,
+                    "iterations": res.iterations,
+                    "energy": float(res.energy[-1]),
+                    "seconds": sec,
+                }
             )
     return out
 
@@ -82,8 +87,12 @@ def preconditioner_study() -> list[dict]:
             for sc, ln in CASES:
                 _, res, _ = _join(_sample(sc, ln))
                 out.append(
-                    {"case": f"{sc}/{ln}", "stretch_scale": scale,
-                     "iterations": res.iterations, "energy": float(res.energy[-1])}
+                    {
+                        "case": f"{sc}/{ln}",
+                        "stretch_scale": scale,
+                        "iterations": res.iterations,
+                        "energy": float(res.energy[-1]),
+                    }
                 )
     finally:
         terms.StretchTerm.preconditioner_scale = kept

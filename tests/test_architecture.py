@@ -124,10 +124,7 @@ def test_every_module_is_on_the_architecture_page():
 def test_imports_point_down_the_architecture_page():
     rank = architecture_order()
     upward = sorted(
-        f"{u} imports {v}"
-        for u, deps in import_graph().items()
-        for v in deps
-        if rank[v] < rank[u]
+        f"{u} imports {v}" for u, deps in import_graph().items() for v in deps if rank[v] < rank[u]
     )
     assert not upward, f"imports that point up docs/architecture.md: {upward}"
 

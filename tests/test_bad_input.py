@@ -692,16 +692,15 @@ def test_guest_already_welded_to_the_host():
     first = _join()
     again = _join(first.guest)
     assert np.isfinite(again.guest.V).all()
-    # the seam was already there: the second join moves it by rounding only (1e-9 of size)
+    # the seam was already there: the second join stops at its energy floor and moves the
+    # guest by rounding only (measured 7e-16 of its size); 1e-9 leaves room for other BLAS
     size = np.ptp(GUEST.V, axis=0).max()
     n = first.guest.n_vertices
-    assert np.abs(again.guest.V[:n] - first.guest.V).max() <= 1e-3 * size
+    assert np.abs(again.guest.V[:n] - first.guest.V).max() <= 1e-9 * size
 
 
-def _table() -> str:
+def _table(tmp: Path) -> str:
     rows = []
-    tmp = Path(os.environ.get("TMPDIR", "/tmp")) / "igljoin-error-table"
-    tmp.mkdir(parents=True, exist_ok=True)
     for case in CORPUS:
         try:
             case.action(tmp)
@@ -722,8 +721,8 @@ def _table() -> str:
     )
 
 
-def test_error_table_in_docs_is_current():
-    table = _table()
+def test_error_table_in_docs_is_current(tmp_path):
+    table = _table(tmp_path)
     if os.environ.get("IGLJOIN_UPDATE_DOCS"):
         DOC.write_text(table, encoding="utf-8")
     assert DOC.read_text(encoding="utf-8") == table, (

@@ -336,6 +336,7 @@ def test_host_values_follow_the_arrays_and_are_kept_on_the_solver():
     assert b.metrics["host_dihedral_deg"]["max"] == float(plain.max())
     assert a.metrics["crease_onering_deg"] == b.metrics["crease_onering_deg"]
 
+
 # -- point to polyline distances --------------------------------------------------------------
 
 
