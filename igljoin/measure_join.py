@@ -38,7 +38,7 @@ def _rest_fit(rest_fits: dict, corr: Correspondence, at_host, closed, band) -> B
     """The rest guest's band fit along its seam, made once per set-up (kept in ``rest_fits``)."""
     key = (at_host.tobytes(), bool(closed), float(band))
     if key not in rest_fits:
-        rest_fits[key] = band_fit(corr.V, corr.F, at_host, closed, band)
+        rest_fits[key] = band_fit(corr.V, corr.F, at_host, closed, band, compiled=True)
     return rest_fits[key]
 
 

@@ -596,3 +596,51 @@ def test_self_intersections_of_welded_joins(joins):
     pw = pushed.merged
     band = metrics.ring_band(pw.mesh.F, pw.seam, metrics.SELF_INTERSECTION_RINGS)
     assert len(_check_self_intersections(pw.mesh.V, pw.mesh.F, band))
+
+
+# -- summaries and band fits ------------------------------------------------------------------
+
+
+def test_summary_median_and_p95_are_numpys_to_the_bit():
+    rng = np.random.default_rng(5)
+    for n in [*range(1, 60), 95, 100, 101, 2435, 4774]:
+        for scale in (1e-6, 1.0, 1e6):
+            v = rng.normal(size=n) * scale
+            if n % 2:
+                v = np.round(v / scale, 1) * scale  # ties
+            got = metrics.summary(np.concatenate([v, [np.nan, np.inf]]))
+            assert got == {
+                "mean": float(v.mean()),
+                "median": float(np.median(v)),
+                "p95": float(np.percentile(v, 95)),
+                "min": float(v.min()),
+                "max": float(v.max()),
+            }
+
+
+@pytest.mark.parametrize("key", PAPER)
+def test_compiled_band_fits_match_the_array_fits(joins, key):
+    from igljoin.bandfit import band_fit
+
+    s, res = joins[key]
+    c, sm = res.correspondence, res.seams[0]
+    band = res.metrics["crease_deg"]["band"]
+    for V, F, curve in (
+        (s.host.V, s.host.F, sm.host_curve),
+        (c.V, c.F, sm.seam),
+        (c.V, c.F, sm.guest_at_host),
+    ):
+        a = band_fit(V, F, curve, sm.closed, band)
+        b = band_fit(V, F, curve, sm.closed, band, compiled=True)
+        _assert_same(a.counts, b.counts)
+        assert np.array_equal(a.weights.indices, b.weights.indices)
+        # 1e-13: the same sums and an 8 x 8 elimination in another order; rounding
+        # (measured up to 3e-15 of the largest weight)
+        scale = np.abs(a.weights.data).max()
+        assert np.abs(a.weights.data - b.weights.data).max() <= 1e-13 * scale
+        assert np.abs(a.frames.inward - b.frames.inward).max() <= 1e-12  # unit vectors
+        # slope errors come from the fits' residuals, a difference of nearly equal
+        # sums: 1e-10 of the largest (measured up to 2e-12; 1e-6 rad stands for the
+        # largest where a flat guest's are rounding, ~1e-20)
+        se = np.abs(a.slope_error).max()
+        assert np.abs(a.slope_error - b.slope_error).max() <= 1e-10 * max(se, 1e-6)
