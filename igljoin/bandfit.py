@@ -22,8 +22,8 @@ smooth-join term its rows (:class:`igljoin.terms.SmoothJoinTerm`, mode
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+from itertools import chain
 
 import numba as nb
 import numpy as np
@@ -260,7 +260,6 @@ def band_fit(
     band: float,
     *,
     curve_points: np.ndarray | None = None,
-    compiled: bool = False,
 ) -> BandFit:
     """Fit the surface beside a boundary curve over a band, at each curve vertex.
 
@@ -275,13 +274,6 @@ def band_fit(
     curve_points : ndarray, shape (k, 3), optional
         Positions that give the curve tangents (default ``V[curve]``), e.g. the
         host curve when fitting a guest that lies on it.
-    compiled : bool
-        Solve the per-vertex least squares and their residuals by compiled
-        loops (several times faster) instead of the array code they restate;
-        the fit is the same to rounding (1e-15 relative). The measures use
-        them; the smooth-join terms keep the array code, because an
-        ill-conditioned join carries a change of rounding in its rows into
-        its iteration (1e-15 there moved a paper sample's energy by 3e-9).
 
     Returns
     -------
@@ -305,12 +297,13 @@ def band_fit(
     from scipy.spatial import cKDTree  # here: scipy.spatial costs start-up time
 
     hits = cKDTree(V[near]).query_ball_point(A, band)
-    counts = np.fromiter((len(h) for h in hits), dtype=np.int64, count=k)
+    counts = np.fromiter(map(len, hits), dtype=np.int64, count=k)
     M = max(int(counts.max()) if k else 0, 1)
     idx = np.zeros((k, M), dtype=np.int64)
     valid = np.arange(M)[None, :] < counts[:, None]
-    if counts.sum():
-        idx[valid] = near[np.concatenate([np.asarray(h, dtype=np.int64) for h in hits])]
+    total = int(counts.sum())
+    if total:
+        idx[valid] = near[np.fromiter(chain.from_iterable(hits), dtype=np.int64, count=total)]
     valid &= idx != curve[:, None]
     # on the same sheet of the surface as the curve vertex
     n0 = VN[curve]
@@ -336,7 +329,8 @@ def band_fit(
     valid &= r2 <= 1.0
     w = np.where(valid, (1.0 - r2) ** 2 + 1e-3, 0.0)
     used = valid.sum(axis=1)
-    Z = _fit_rows_compiled(u, v, w, used) if compiled else _fit_rows(u, v, w, used)
+    X = _columns(u, v, used)
+    Z = _fit_rows(X, w)
     beta = Z[:, 1, :] / band
     rows = np.repeat(np.arange(k), M)
     data = np.concatenate([beta.reshape(-1), -beta.sum(axis=1)])
@@ -356,11 +350,7 @@ def band_fit(
         frames=SeamFrames(normal=normal, tangent=T, inward=inward),
         band=band,
         counts=used,
-        slope_error=(
-            _slope_error_compiled(Z, u, v, D, normal, band, used)
-            if compiled
-            else _slope_error(Z, _columns(u, v, used), D, normal, band, used)
-        ),
+        slope_error=_slope_error(Z, X, D, normal, band, used),
     )
 
 
@@ -384,22 +374,21 @@ def _slope_error(Z, X, D, normal, band: float, used: np.ndarray) -> np.ndarray:
     return np.where(dof > 0, se, 0.0)
 
 
-def _fit_rows(u: np.ndarray, v: np.ndarray, w: np.ndarray, used: np.ndarray) -> np.ndarray:
-    """Rows ``Z`` (k, 5, M) of the weighted least-squares fit by ``[u, v, u², uv, v²]``.
+def _fit_rows(X: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Rows ``Z`` (k, 8, M) of the weighted least-squares fit by the columns ``X`` (k, M, 8).
 
-    ``Z[:, i] @ y`` is coefficient ``i`` of the fit of values ``y`` (k, M) at
-    the band vertices; row 1 gives the ``v`` derivative at the curve vertex.
-    Where a band has fewer than :data:`_QUADRATIC_MIN` vertices the quadratic
-    columns are dropped (a plane fit) and their rows are zero.
+    ``X`` from :func:`_columns`, weights ``w`` (k, M). ``Z[:, i] @ y`` is
+    coefficient ``i`` of the fit of values ``y`` (k, M) at the band vertices;
+    row 1 gives the ``v`` derivative at the curve vertex. A dropped (zero)
+    column has a zero row.
     """
-    X = _columns(u, v, used)
-    XtW = np.einsum("kmi,km->kim", X, w)
-    H = np.einsum("kim,kmj->kij", XtW, X)
+    XtW, H = _normal_equations(X, w)
     # a small ridge keeps a thin or empty band solvable; it only matters there
     ridge = 1e-8 * np.maximum(np.trace(H, axis1=1, axis2=2), 1e-12)[:, None, None]
     return np.linalg.solve(H + ridge * np.eye(H.shape[1]), XtW)
 
 
+@nb.njit(cache=True)
 def _columns(u: np.ndarray, v: np.ndarray, used: np.ndarray) -> np.ndarray:
     """Design columns (k, M, 8) of the fit, fewer where a band has few vertices.
 
@@ -407,12 +396,25 @@ def _columns(u: np.ndarray, v: np.ndarray, used: np.ndarray) -> np.ndarray:
     along the curve beyond it (round a tube). Bands with fewer than
     :data:`_FULL_MIN` vertices drop the last three, with fewer than
     :data:`_QUADRATIC_MIN` the quadratic too (a plane: biased on a curved surface,
-    so the last resort); dropped columns are zero.
+    so the last resort); dropped columns are zero. Compiled (one pass; each
+    entry the one product the array expression ``u * u``, ``u * v``, ...
+    rounds).
     """
-    uu = u * u
-    X = np.stack([u, v, uu, u * v, v * v, uu * u, uu * uu, uu * v], axis=2)
-    X[used < _FULL_MIN, :, 5:] = 0.0
-    X[used < _QUADRATIC_MIN, :, 2:] = 0.0
+    k, M = u.shape
+    X = np.empty((k, M, 8))
+    for r in range(k):
+        full, quadratic = used[r] >= _FULL_MIN, used[r] >= _QUADRATIC_MIN
+        for m in range(M):
+            a, b = u[r, m], v[r, m]
+            aa = a * a
+            X[r, m, 0] = a
+            X[r, m, 1] = b
+            X[r, m, 2] = aa if quadratic else 0.0
+            X[r, m, 3] = a * b if quadratic else 0.0
+            X[r, m, 4] = b * b if quadratic else 0.0
+            X[r, m, 5] = aa * a if full else 0.0
+            X[r, m, 6] = aa * aa if full else 0.0
+            X[r, m, 7] = aa * b if full else 0.0
     return X
 
 
@@ -421,144 +423,28 @@ def _parameters(used: np.ndarray) -> np.ndarray:
     return np.where(used >= _FULL_MIN, 8, np.where(used >= _QUADRATIC_MIN, 5, 2))
 
 
-# The per-vertex least squares compiled (numba, cached on disk): the same sums as
-# :func:`_fit_rows` and :func:`_slope_error`, one curve vertex at a time, without
-# the (k, M, 8) temporaries of the array version.
-
-
 @nb.njit(cache=True)
-def _design(u: np.ndarray, v: np.ndarray, used: int, X: np.ndarray) -> None:
-    """Fill ``X`` (M, 8) with the design columns of one band (see :func:`_columns`)."""
-    for m in range(len(u)):
-        a, b = u[m], v[m]
-        aa = a * a
-        X[m, 0] = a
-        X[m, 1] = b
-        X[m, 2] = aa
-        X[m, 3] = a * b
-        X[m, 4] = b * b
-        X[m, 5] = aa * a
-        X[m, 6] = aa * aa
-        X[m, 7] = aa * b
-        if used < _FULL_MIN:
-            X[m, 5] = 0.0
-            X[m, 6] = 0.0
-            X[m, 7] = 0.0
-        if used < _QUADRATIC_MIN:
-            X[m, 2] = 0.0
-            X[m, 3] = 0.0
-            X[m, 4] = 0.0
+def _normal_equations(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``XᵀW`` (k, p, M) and ``XᵀWX`` (k, p, p) of columns ``X`` (k, M, p) and weights ``w`` (k, M).
 
-
-@nb.njit(cache=True)
-def _fit_rows_compiled(u: np.ndarray, v: np.ndarray, w: np.ndarray, used: np.ndarray) -> np.ndarray:
-    """:func:`_fit_rows` compiled: rows ``Z`` (k, 8, M), one band at a time."""
-    k, M = u.shape
-    Z = np.zeros((k, 8, M))
-    X = np.empty((M, 8))
-    XtW = np.empty((8, M))
-    H = np.empty((8, 8))
+    Compiled: the products and the sums over the band vertices in the order
+    of ``np.einsum("kmi,km->kim")`` and ``np.einsum("kim,kmj->kij")`` (each
+    sum taken first to last), so the floats are theirs, without the einsum
+    passes over (k, M, p) arrays; a band vertex of weight 0 (the padding of
+    the shorter bands) adds only zeros and is skipped.
+    """
+    k, M, p = X.shape
+    XtW = np.empty((k, p, M))
+    H = np.zeros((k, p, p))
     for r in range(k):
-        _design(u[r], v[r], used[r], X)
-        H[:] = 0.0
         for m in range(M):
             wm = w[r, m]
+            for i in range(p):
+                XtW[r, i, m] = X[r, m, i] * wm
             if wm == 0.0:
-                for i in range(8):
-                    XtW[i, m] = 0.0
-                continue
-            for i in range(8):
-                a = X[m, i] * wm
-                XtW[i, m] = a
-                for j in range(8):
-                    H[i, j] += a * X[m, j]
-        trace = 0.0
-        for i in range(8):
-            trace += H[i, i]
-        # a small ridge keeps a thin or empty band solvable; it only matters there
-        ridge = 1e-8 * max(trace, 1e-12)
-        for i in range(8):
-            H[i, i] += ridge
-        _lu_solve(H, XtW, Z[r])
-    return Z
-
-
-@nb.njit(cache=True)
-def _lu_solve(H: np.ndarray, B: np.ndarray, out: np.ndarray) -> None:
-    """``out = H⁻¹ B`` by Gaussian elimination with partial pivoting (``H`` is overwritten).
-
-    ``H`` (p, p), ``B`` and ``out`` (p, M). The elimination of LAPACK's
-    ``gesv`` for a small matrix, without its per-call overhead (which in
-    numba outweighs an 8 × 8 solve).
-    """
-    p, M = B.shape
-    out[:] = B
-    for c in range(p):
-        piv = c
-        for r in range(c + 1, p):
-            if abs(H[r, c]) > abs(H[piv, c]):
-                piv = r
-        if piv != c:
-            for j in range(p):
-                H[c, j], H[piv, j] = H[piv, j], H[c, j]
-            for m in range(M):
-                out[c, m], out[piv, m] = out[piv, m], out[c, m]
-        inv = 1.0 / H[c, c]
-        for r in range(c + 1, p):
-            f = H[r, c] * inv
-            if f == 0.0:
-                continue
-            for j in range(c + 1, p):
-                H[r, j] -= f * H[c, j]
-            for m in range(M):
-                out[r, m] -= f * out[c, m]
-    for c in range(p - 1, -1, -1):
-        inv = H[c, c]
-        for m in range(M):
-            out[c, m] /= inv
-        for r in range(c):
-            f = H[r, c]
-            if f == 0.0:
-                continue
-            for m in range(M):
-                out[r, m] -= f * out[c, m]
-
-
-@nb.njit(cache=True)
-def _slope_error_compiled(Z, u, v, D, normal, band: float, used) -> np.ndarray:
-    """:func:`_slope_error` compiled, shape (k,)."""
-    k, M = u.shape
-    se = np.zeros(k)
-    X = np.empty((M, 8))
-    z = np.empty(M)
-    coef = np.empty(8)
-    for r in range(k):
-        p = 8 if used[r] >= _FULL_MIN else (5 if used[r] >= _QUADRATIC_MIN else 2)
-        dof = used[r] - p
-        if dof <= 0:
-            continue
-        _design(u[r], v[r], used[r], X)
-        for m in range(M):
-            z[m] = D[r, m, 0] * normal[r, 0] + D[r, m, 1] * normal[r, 1] + D[r, m, 2] * normal[r, 2]
-        for i in range(8):
-            acc = 0.0
-            for m in range(M):
-                acc += Z[r, i, m] * z[m]
-            coef[i] = acc
-        ss = 0.0
-        zz = 0.0
-        for m in range(M):
-            present = False
-            for i in range(8):
-                if Z[r, i, m] != 0.0:
-                    present = True
-                    break
-            if present:
-                fitted = 0.0
-                for i in range(8):
-                    fitted += X[m, i] * coef[i]
-                res = z[m] - fitted
-                ss += res * res
-            zz += Z[r, 1, m] * Z[r, 1, m]
-        se[r] = math.sqrt(ss / dof * zz) / band
-    return se
+                continue  # its products are zeros: adding them leaves every sum as it is
+            for i in range(p):
+                a = XtW[r, i, m]
+                for j in range(p):
+                    H[r, i, j] += a * X[r, m, j]
+    return XtW, H

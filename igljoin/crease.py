@@ -103,7 +103,7 @@ def _measure(guest, host, R: np.ndarray | None = None, g=None) -> CreaseMeasure:
 
 
 def _host_fit(seam: SeamGeometry, band: float) -> BandFit:
-    return band_fit(seam.Vh, seam.Fh, seam.host_curve, seam.closed, band, compiled=True)
+    return band_fit(seam.Vh, seam.Fh, seam.host_curve, seam.closed, band)
 
 
 def seam_crease(
@@ -141,20 +141,12 @@ def seam_crease(
         band = default_band(seam)
     host = host_fit or _host_fit(seam, band)
     if rest is not None:
-        guest = rest_fit or band_fit(
-            rest, seam.Fg, seam.guest_at_host, seam.closed, band, compiled=True
-        )
+        guest = rest_fit or band_fit(rest, seam.Fg, seam.guest_at_host, seam.closed, band)
         c = guest.weights @ seam.Vg
         T = host.frames.tangent
         return _measure(guest, host, g=unit(c - np.einsum("ij,ij->i", c, T)[:, None] * T))
     guest = band_fit(
-        seam.Vg,
-        seam.Fg,
-        seam.guest_at_host,
-        seam.closed,
-        band,
-        curve_points=seam.host_points,
-        compiled=True,
+        seam.Vg, seam.Fg, seam.guest_at_host, seam.closed, band, curve_points=seam.host_points
     )
     return _measure(guest, host)
 
@@ -189,9 +181,7 @@ def input_crease(
     """
     R, _ = rigid_fit(seam.Vg[seam.guest_at_host], seam.host_points)
     host = host_fit or _host_fit(seam, band)
-    guest = guest_fit or band_fit(
-        seam.Vg, seam.Fg, seam.guest_at_host, seam.closed, band, compiled=True
-    )
+    guest = guest_fit or band_fit(seam.Vg, seam.Fg, seam.guest_at_host, seam.closed, band)
     return _measure(guest, host, R)
 
 

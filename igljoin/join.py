@@ -23,19 +23,22 @@ from . import seams as seams_
 from .errors import OptionsError
 from .host_values import HostValues
 from .join_terms import TermInputs, build_terms, seam_bands
-from .measure_join import join_result
+from .measure_join import RestMeasures, join_result
 from .mesh import Mesh, as_mesh
 from .options import JoinOptions
 from .result import JoinResult
 from .seams import SeamPair
 from .solve import LocalGlobalSolver
-from .start import bulge, rigid_start
+from .start import bulge, bulge_basis, rigid_start
 from .stiffness import needs_guest, resolve_stiffness
 from .terms import unique_edges
 from .twolevel import TwoLevelModel
 from .validate import check_surface
 
 __all__ = ["JoinSolver", "JoinResult", "SeamPair", "SolveProgress", "join"]
+
+#: Marks a value of the set-up not made yet (``None`` is a value).
+_UNSET = object()
 
 # options that change the quadratic form (and so need a new factorization)
 _STRUCTURAL = JoinOptions.structural_fields()
@@ -227,11 +230,14 @@ class JoinSolver:
             )
         )
         self.built, self.terms = built, built.terms
-        self._rest_fits = {}  # the rest guest's band fits along its seams (see join_result)
+        self._rest = RestMeasures(c, self.E)  # the rest guest's measures (see join_result)
         t2 = time.perf_counter()
         # §4.5: the seam vertices fixed in one factorization
         self.solver = LocalGlobalSolver(self.terms, len(c.V), c.seam, opt.linear_solver)
         self.factorizations += 1
+        # made on a solve's first use (see _bumped, initial_guess) and kept until the next set-up
+        self._bump = None
+        self._bulge_basis: Any = _UNSET
         self.timings.update(correspond=t1 - t0, terms=t2 - t1, factor=self.solver.factor_seconds)
 
     # -- solving ----------------------------------------------------------------------------
@@ -267,8 +273,16 @@ class JoinSolver:
         if self.options.initial_guess == "extend":
             X = X + self.solver.extend(bc - X[c.seam])
             # a compressed disk-like guest bulges instead of shrinking
-            X = bulge(X, c.V, c.F, c.seam, self.host, self.host_curve, self.solver.bump)
+            if self._bulge_basis is _UNSET:
+                self._bulge_basis = bulge_basis(c.V, c.F, c.seam, self.host, self.host_curve)
+            X = bulge(X, c.F, self._bulge_basis, self._bumped)
         return X
+
+    def _bumped(self) -> np.ndarray:
+        """The factorization's response to a unit load (``LocalGlobalSolver.bump``), made once."""
+        if self._bump is None:
+            self._bump = self.solver.bump()
+        return self._bump
 
     def warm_start(self, start: Any, targets: np.ndarray) -> np.ndarray:
         """Positions ``start`` with their seam moved onto ``targets``, the move extended smoothly.
@@ -376,7 +390,7 @@ class JoinSolver:
             E=self.E,
             bands=self.bands,
             built=self.built,
-            rest_fits=self._rest_fits,
+            rest=self._rest,
         )
         t3 = time.perf_counter()
         timings = dict(self.timings)

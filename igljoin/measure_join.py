@@ -10,6 +10,7 @@ the weld and its self-intersections (:func:`igljoin.measure.weld_metrics`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -18,7 +19,7 @@ from . import crease, metrics
 from .bandfit import BandFit, band_fit
 from .correspond import Correspondence
 from .crease import CreaseMeasure
-from .frames import face_normals_areas
+from .frames import face_areas
 from .host_values import HostValues
 from .join_terms import JoinTerms, join_angles
 from .measure import combined_gap
@@ -27,33 +28,68 @@ from .options import JoinOptions
 from .result import JoinedSeam, JoinResult
 from .seam_geometry import SeamGeometry
 
-__all__ = ["join_result"]
+__all__ = ["join_result", "RestMeasures"]
 
 
 def _dihedral_summary(angles: np.ndarray) -> dict:
     return {**metrics.summary(angles), "rings": metrics.HOST_DIHEDRAL_RINGS}
 
 
-def _rest_fit(rest_fits: dict, corr: Correspondence, at_host, closed, band) -> BandFit:
-    """The rest guest's band fit along its seam, made once per set-up (kept in ``rest_fits``)."""
-    key = (at_host.tobytes(), bool(closed), float(band))
-    if key not in rest_fits:
-        rest_fits[key] = band_fit(corr.V, corr.F, at_host, closed, band, compiled=True)
-    return rest_fits[key]
+class RestMeasures:
+    """The rest guest's side of a join's measures, made on first use and kept by a solver.
 
+    The rest guest is fixed until the next set-up, so its band fits along the
+    seams, the input crease, its face areas and edge lengths and its adjacent
+    face pairs are the same on every solve; a re-solve measures only what its
+    new positions change.
 
-def _seam_creases(
-    seam: SeamGeometry,
-    rest: np.ndarray,
-    band: float,
-    host_fit: BandFit,
-    rest_fit: BandFit,
-    host_inward: np.ndarray,
-) -> tuple[CreaseMeasure, CreaseMeasure, np.ndarray]:
-    """The band crease of the result and of the inputs, and the one-ring crease, of one seam."""
-    measured = crease.seam_crease(seam, band, rest, host_fit, rest_fit)
-    inputs = crease.input_crease(seam.with_guest(rest), band, host_fit, rest_fit)
-    return measured, inputs, metrics.crease_angles(seam, host_inward)
+    Parameters
+    ----------
+    corr : Correspondence
+        Of all seams (the refined rest guest).
+    E : ndarray of int64, shape (e, 2)
+        Its unique edges.
+    """
+
+    def __init__(self, corr: Correspondence, E: np.ndarray):
+        self.corr, self.E = corr, E
+        self.made: dict[tuple, Any] = {}
+
+    def _kept(self, key: tuple, make: Callable[[], Any]) -> Any:
+        if key not in self.made:
+            self.made[key] = make()
+        return self.made[key]
+
+    def fit(self, at_host: np.ndarray, closed: bool, band: float) -> BandFit:
+        """The rest guest's band fit along ``at_host`` (serves both band measures)."""
+        c = self.corr
+        key = ("fit", at_host.tobytes(), bool(closed), float(band))
+        return self._kept(key, lambda: band_fit(c.V, c.F, at_host, closed, band))
+
+    def input_crease(
+        self, seam: SeamGeometry, band: float, host_fit: BandFit, rest_fit: BandFit
+    ) -> CreaseMeasure:
+        """:func:`igljoin.crease.input_crease` of ``seam`` with the rest guest."""
+        key = ("input", seam.guest_at_host.tobytes(), seam.host_curve.tobytes(), float(band))
+        return self._kept(
+            key,
+            lambda: crease.input_crease(seam.with_guest(self.corr.V), band, host_fit, rest_fit),
+        )
+
+    @property
+    def areas(self) -> np.ndarray:
+        """Face areas, shape (m,)."""
+        return self._kept(("areas",), lambda: face_areas(self.corr.V, self.corr.F))
+
+    @property
+    def edge_lengths(self) -> np.ndarray:
+        """Lengths of the edges ``E``, shape (e,)."""
+        return self._kept(("lengths",), lambda: metrics.edge_lengths(self.corr.V, self.E))
+
+    @property
+    def folds(self) -> metrics.FoldReference:
+        """Adjacent face pairs and their rest cosines (:func:`igljoin.metrics.fold_reference`)."""
+        return self._kept(("folds",), lambda: metrics.fold_reference(self.corr.V, self.corr.F))
 
 
 def join_result(
@@ -70,7 +106,7 @@ def join_result(
     E: np.ndarray,
     bands: list[float],
     built: JoinTerms,
-    rest_fits: dict,
+    rest: RestMeasures,
 ) -> JoinResult:
     """The result of a solve, with its measurements and its weld.
 
@@ -100,9 +136,8 @@ def join_result(
         Each seam's band width.
     built : JoinTerms
         The terms of the solve (their soft rows, the crease they remove).
-    rest_fits : dict
-        The rest guest's band fits along its seams, kept between solves of
-        one set-up; filled here.
+    rest : RestMeasures
+        The rest guest's measures, kept between solves of one set-up.
 
     Returns
     -------
@@ -110,8 +145,9 @@ def join_result(
     """
     c, X, bc = corr, run.X, targets
     measured_host = host_values.measured  # same vertex ids as the host
-    ratio = metrics.area_ratio(c.V, X, c.F)
-    strain = metrics.edge_strain(c.V, X, E)
+    areas = face_areas(X, c.F)
+    ratio = metrics.area_ratio(c.V, X, c.F, rest_areas=rest.areas, areas=areas)
+    strain = metrics.edge_strain(c.V, X, E, rest_lengths=rest.edge_lengths)
     vertex_strain = metrics.vertex_strain(E, strain, len(X))
     displacement = metrics.nonrigid_displacement(c.V, X)
     on_seam = np.zeros(len(X), dtype=bool)
@@ -140,16 +176,11 @@ def join_result(
         geometry = SeamGeometry(
             measured_host.V, measured_host.F, hc.indices, X, c.F, at_host, hc.closed
         )
-        # the rest guest is fixed too (until the next set-up): its fit along the
-        # seam serves both band measures, on every solve
-        measured, inputs, onering = _seam_creases(
-            geometry,
-            c.V,
-            band,
-            host_values.band_fit(hc, band),
-            _rest_fit(rest_fits, c, at_host, hc.closed, band),
-            host_values.inward(hc),
-        )
+        # the band crease of the result and of the inputs, and the one-ring crease
+        host_fit, rest_fit = host_values.band_fit(hc, band), rest.fit(at_host, hc.closed, band)
+        measured = crease.seam_crease(geometry, band, c.V, host_fit, rest_fit)
+        inputs = rest.input_crease(geometry, band, host_fit, rest_fit)
+        onering = metrics.crease_angles(geometry, host_values.inward(hc))
         measured_all.append(measured)
         inputs_all.append(inputs)
         onering_all.append(onering)
@@ -207,7 +238,7 @@ def join_result(
         "host_curve": len(host_curve),
         "seams": len(seams),
     }
-    total_ratio = float(face_normals_areas(X, c.F)[1].sum() / face_normals_areas(c.V, c.F)[1].sum())
+    total_ratio = float(areas.sum() / rest.areas.sum())
     m = {
         "seam_gap": combined_gap(gaps, [len(sm.seam) for sm in seams]),
         "crease_deg": crease.report(measured_all),
@@ -220,7 +251,7 @@ def join_result(
         "strain": metrics.summary(strain),
         "vertex_strain": metrics.summary(vertex_strain),
         "displacement_nonrigid": metrics.summary(displacement),
-        "folded_pairs": len(metrics.folded_pairs(c.V, X, c.F)),
+        "folded_pairs": len(metrics.folded_pairs(c.V, X, c.F, rest=rest.folds)),
         "crease_removed_deg": metrics.summary(np.concatenate(removed) if removed else np.zeros(0)),
         "seams": per_seam,
     }

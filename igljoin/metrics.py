@@ -36,6 +36,8 @@ Self-intersections
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -57,6 +59,9 @@ __all__ = [
     "self_intersections",
     "seam_gap",
     "folded_pairs",
+    "fold_reference",
+    "FoldReference",
+    "edge_lengths",
     "summary",
     "point_polyline_distance",
 ]
@@ -68,7 +73,14 @@ SELF_INTERSECTION_RINGS = 3
 HOST_DIHEDRAL_RINGS = 2
 
 
-def area_ratio(V0: np.ndarray, V1: np.ndarray, F: np.ndarray) -> np.ndarray:
+def area_ratio(
+    V0: np.ndarray,
+    V1: np.ndarray,
+    F: np.ndarray,
+    *,
+    rest_areas: np.ndarray | None = None,
+    areas: np.ndarray | None = None,
+) -> np.ndarray:
     """Deformed over rest area of each face (the paper's deformation display).
 
     Parameters
@@ -76,21 +88,30 @@ def area_ratio(V0: np.ndarray, V1: np.ndarray, F: np.ndarray) -> np.ndarray:
     V0, V1 : ndarray, shape (n, 3)
         Rest and deformed positions.
     F : ndarray of int64, shape (m, 3)
+    rest_areas, areas : ndarray, shape (m,), optional
+        ``face_areas(V0, F)`` and ``face_areas(V1, F)``, if already made
+        (a solver keeps its rest guest's).
 
     Returns
     -------
     ndarray, shape (m,)
         1 where a face kept its area, > 1 stretched, < 1 shrunk.
     """
-    a0 = face_areas(V0, F)
-    a1 = face_areas(V1, F)
+    a0 = face_areas(V0, F) if rest_areas is None else rest_areas
+    a1 = face_areas(V1, F) if areas is None else areas
     return a1 / np.where(a0 > 0, a0, np.nan)
 
 
-def edge_strain(V0: np.ndarray, V1: np.ndarray, E: np.ndarray) -> np.ndarray:
-    """Relative length change ``(ℓ′ − ℓ)/ℓ`` of each edge ``E`` (shape (e, 2)) -> (e,)."""
+def edge_strain(
+    V0: np.ndarray, V1: np.ndarray, E: np.ndarray, *, rest_lengths: np.ndarray | None = None
+) -> np.ndarray:
+    """Relative length change ``(ℓ′ − ℓ)/ℓ`` of each edge ``E`` (shape (e, 2)) -> (e,).
+
+    ``rest_lengths`` (e,): the edges' lengths in ``V0``, if already made
+    (:func:`edge_lengths`).
+    """
     E = np.asarray(E)
-    l0 = _edge_lengths(V0, E)
+    l0 = _edge_lengths(V0, E) if rest_lengths is None else rest_lengths
     l1 = _edge_lengths(V1, E)
     return (l1 - l0) / np.where(l0 > 0, l0, np.nan)
 
@@ -106,6 +127,11 @@ def _row_norms(D: np.ndarray) -> np.ndarray:
         D = D.astype(np.float64)
     sq = D * D
     return np.sqrt((sq[0] + sq[1]) + sq[2])
+
+
+def edge_lengths(V: np.ndarray, E: np.ndarray) -> np.ndarray:
+    """Length of each edge ``V[E[:, 0]] − V[E[:, 1]]``, shape (e,), for ``E`` of shape (e, 2)."""
+    return _edge_lengths(V, np.asarray(E))
 
 
 def _edge_lengths(V: np.ndarray, E: np.ndarray) -> np.ndarray:
@@ -936,7 +962,14 @@ def seam_gap(seam_points: np.ndarray, host_points: np.ndarray, closed: bool) -> 
     }
 
 
-def folded_pairs(V0: np.ndarray, V1: np.ndarray, F: np.ndarray, angle: float = 150.0) -> np.ndarray:
+def folded_pairs(
+    V0: np.ndarray,
+    V1: np.ndarray,
+    F: np.ndarray,
+    angle: float = 150.0,
+    *,
+    rest: FoldReference | None = None,
+) -> np.ndarray:
     """Adjacent face pairs whose normals turned against each other.
 
     A pair counts when the angle between the two faces' normals exceeds
@@ -947,22 +980,51 @@ def folded_pairs(V0: np.ndarray, V1: np.ndarray, F: np.ndarray, angle: float = 1
     V0, V1 : ndarray, shape (n, 3)
     F : ndarray of int64, shape (m, 3)
     angle : float
+    rest : FoldReference, optional
+        ``fold_reference(V0, F)``, if already made (a solver keeps its rest
+        guest's).
 
     Returns
     -------
     ndarray of int64, shape (p, 2)
         Face index pairs.
     """
-    pairs, _ = _adjacent_face_pairs(F)
+    pairs, first, second, c0 = fold_reference(V0, F) if rest is None else rest
     if not len(pairs):
         return pairs
     limit = np.cos(np.radians(angle))
-    n0, _ = face_normals_areas(V0, F)
     n1, _ = face_normals_areas(V1, F)
-    first, second = np.ascontiguousarray(pairs[:, 0]), np.ascontiguousarray(pairs[:, 1])
-    c0 = _pair_cosines(n0, first, second)
     c1 = _pair_cosines(n1, first, second)
     return pairs[(c1 < limit) & (c0 >= limit)]
+
+
+class FoldReference(NamedTuple):
+    """The rest mesh's side of :func:`folded_pairs`.
+
+    Attributes
+    ----------
+    pairs : ndarray of int64, shape (p, 2)
+        Adjacent face pairs (:func:`_adjacent_face_pairs`).
+    first, second : ndarray of int64, shape (p,)
+        Their columns, contiguous.
+    cosines : ndarray, shape (p,)
+        Cosine of the angle between each pair's rest normals.
+    """
+
+    pairs: np.ndarray
+    first: np.ndarray
+    second: np.ndarray
+    cosines: np.ndarray
+
+
+def fold_reference(V0: np.ndarray, F: np.ndarray) -> FoldReference:
+    """The adjacent face pairs of ``F`` and their normals' cosines at rest ``V0`` (n, 3)."""
+    pairs, _ = _adjacent_face_pairs(F)
+    first, second = np.ascontiguousarray(pairs[:, 0]), np.ascontiguousarray(pairs[:, 1])
+    if not len(pairs):
+        return FoldReference(pairs, first, second, np.zeros(0))
+    n0, _ = face_normals_areas(V0, F)
+    return FoldReference(pairs, first, second, _pair_cosines(n0, first, second))
 
 
 def _pair_cosines(N: np.ndarray, first: np.ndarray, second: np.ndarray) -> np.ndarray:

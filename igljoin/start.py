@@ -3,21 +3,23 @@
 :func:`rigid_start` places the rest guest by the rigid motion that best fits
 its seam onto the targets; the solver then extends the remaining seam move
 smoothly (:meth:`igljoin.solve.LocalGlobalSolver.extend`), and :func:`bulge`
-lifts a guest that this leaves compressed.
+lifts a guest that this leaves compressed (what it reads of the rest guest and
+the host, :func:`bulge_basis`, is made once per set-up).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 from .boundary import SelectedCurve, boundary_loops
 from .correspond import rigid_fit
-from .frames import face_normals_areas, seam_frames
+from .frames import face_areas, face_normals_areas, seam_frames
 from .mesh import Mesh
 
-__all__ = ["rigid_start", "bulge"]
+__all__ = ["rigid_start", "bulge", "bulge_basis", "BulgeBasis"]
 
 
 def rigid_start(V: np.ndarray, seam: np.ndarray, targets: np.ndarray) -> np.ndarray:
@@ -37,13 +39,68 @@ def rigid_start(V: np.ndarray, seam: np.ndarray, targets: np.ndarray) -> np.ndar
     return V @ R.T + t
 
 
+@dataclass(frozen=True)
+class BulgeBasis:
+    """What a bulge reads of the rest guest and the host: made once per set-up.
+
+    Attributes
+    ----------
+    rest_area : float
+        The rest guest's area.
+    normal : ndarray, shape (3,)
+        Unit mean of the host's seam normals: the direction of the lift.
+    side : float
+        Its sign: the side the host surface curves towards.
+    height : float
+        The largest lift tried: the rest guest's bounding-box diagonal.
+    """
+
+    rest_area: float
+    normal: np.ndarray
+    side: float
+    height: float
+
+
+def bulge_basis(
+    V: np.ndarray, F: np.ndarray, seam: np.ndarray, host: Mesh, curve: SelectedCurve | None
+) -> BulgeBasis | None:
+    """The parts of :func:`bulge` that depend on the rest guest and the host only.
+
+    Parameters
+    ----------
+    V : ndarray, shape (n, 3)
+    F : ndarray of int64, shape (m, 3)
+        The rest guest.
+    seam : ndarray of int64, shape (s,)
+        Its seam vertices.
+    host : Mesh
+    curve : SelectedCurve or None
+        The host curve of a single seam.
+
+    Returns
+    -------
+    BulgeBasis or None
+        ``None`` where no guest is ever lifted: several seams, an open
+        curve, a guest that is not a disk, or host seam normals that cancel.
+    """
+    if curve is None or not curve.closed or len(boundary_loops(F)) != 1:
+        return None
+    rest = face_normals_areas(V, F)[1].sum()
+    frames = seam_frames(host.V, host.F, curve.indices, True)
+    N = frames.normal.mean(axis=0)
+    if np.linalg.norm(N) == 0:
+        return None
+    N = N / np.linalg.norm(N)
+    side = float(np.mean(-frames.inward @ N))
+    if abs(side) < 1e-3:
+        side = float((V.mean(axis=0) - V[seam].mean(axis=0)) @ N) or 1.0
+    return BulgeBasis(rest, N, side, float(np.linalg.norm(np.ptp(V, axis=0))))
+
+
 def bulge(
     X: np.ndarray,
-    V: np.ndarray,
     F: np.ndarray,
-    seam: np.ndarray,
-    host: Mesh,
-    curve: SelectedCurve | None,
+    basis: BulgeBasis | None,
     bump: Callable[[], np.ndarray],
 ) -> np.ndarray:
     """Lift a compressed disk-like guest off its plane so that it bulges instead of shrinking.
@@ -59,14 +116,10 @@ def bulge(
     ----------
     X : ndarray, shape (n, 3)
         Start positions of the guest.
-    V : ndarray, shape (n, 3)
     F : ndarray of int64, shape (m, 3)
-        The rest guest.
-    seam : ndarray of int64, shape (s,)
-        Its seam vertices.
-    host : Mesh
-    curve : SelectedCurve or None
-        The host curve of a single seam (``None`` with several: no lift).
+        Its faces.
+    basis : BulgeBasis or None
+        From :func:`bulge_basis` (``None``: no lift).
     bump : callable
         Returns the guest's response to a unit load on its free vertices,
         shape (n,) (:meth:`igljoin.solve.LocalGlobalSolver.bump`); called
@@ -78,28 +131,20 @@ def bulge(
         ``X``, lifted where the guest is a disk on a closed curve and is
         compressed by more than 0.1 % of its area.
     """
-    if curve is None or not curve.closed or len(boundary_loops(F)) != 1:
+    if basis is None:
         return X
-    rest = face_normals_areas(V, F)[1].sum()
-    if face_normals_areas(X, F)[1].sum() >= (1.0 - 1e-3) * rest:
+    rest = basis.rest_area
+    if face_areas(X, F).sum() >= (1.0 - 1e-3) * rest:
         return X
-    frames = seam_frames(host.V, host.F, curve.indices, True)
-    N = frames.normal.mean(axis=0)
-    if np.linalg.norm(N) == 0:
-        return X
-    N = N / np.linalg.norm(N)
-    side = float(np.mean(-frames.inward @ N))
-    if abs(side) < 1e-3:
-        side = float((V.mean(axis=0) - V[seam].mean(axis=0)) @ N) or 1.0
     phi = bump()
     if phi.max() <= 0:
         return X
-    lift = np.sign(side) * (phi / phi.max())[:, None] * N
+    lift = np.sign(basis.side) * (phi / phi.max())[:, None] * basis.normal
 
     def area(a):
-        return face_normals_areas(X + a * lift, F)[1].sum()
+        return face_areas(X + a * lift, F).sum()
 
-    hi = float(np.linalg.norm(np.ptp(V, axis=0)))
+    hi = basis.height
     if area(hi) < rest:
         return X + hi * lift
     lo = 0.0
