@@ -9,9 +9,11 @@ the host, :func:`bulge_basis`, is made once per set-up).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numba as nb
 import numpy as np
 
 from .boundary import SelectedCurve, boundary_loops
@@ -141,8 +143,12 @@ def bulge(
         return X
     lift = np.sign(basis.side) * (phi / phi.max())[:, None] * basis.normal
 
+    Xc, Lc = np.ascontiguousarray(X, dtype=np.float64), np.ascontiguousarray(lift)
+    Fc = np.ascontiguousarray(F, dtype=np.int64)
+    out = np.empty(len(Fc))
+
     def area(a):
-        return face_areas(X + a * lift, F).sum()
+        return _lifted_areas(Xc, Lc, float(a), Fc, out).sum()
 
     hi = basis.height
     if area(hi) < rest:
@@ -152,3 +158,33 @@ def bulge(
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if area(mid) < rest else (lo, mid)
     return X + 0.5 * (lo + hi) * lift
+
+
+@nb.njit(cache=True)
+def _lifted_areas(
+    X: np.ndarray, lift: np.ndarray, a: float, F: np.ndarray, out: np.ndarray
+) -> np.ndarray:
+    """``face_areas(X + a * lift, F)`` into ``out`` (m,), without the (n, 3) temporaries.
+
+    Compiled; each corner is ``X + (a * lift)`` and each area is rounded as
+    :func:`igljoin.frames.face_areas` rounds it (the cross product's two
+    products and difference, the squares summed left to right, the root,
+    the half), so the floats are its floats; the caller sums them with
+    numpy, as before.
+    """
+    for f in range(len(F)):
+        i, j, k = F[f, 0], F[f, 1], F[f, 2]
+        p0 = X[i, 0] + a * lift[i, 0]
+        p1 = X[i, 1] + a * lift[i, 1]
+        p2 = X[i, 2] + a * lift[i, 2]
+        a0 = (X[j, 0] + a * lift[j, 0]) - p0
+        a1 = (X[j, 1] + a * lift[j, 1]) - p1
+        a2 = (X[j, 2] + a * lift[j, 2]) - p2
+        b0 = (X[k, 0] + a * lift[k, 0]) - p0
+        b1 = (X[k, 1] + a * lift[k, 1]) - p1
+        b2 = (X[k, 2] + a * lift[k, 2]) - p2
+        c0 = a1 * b2 - a2 * b1
+        c1 = a2 * b0 - a0 * b2
+        c2 = a0 * b1 - a1 * b0
+        out[f] = 0.5 * math.sqrt((c0 * c0 + c1 * c1) + c2 * c2)
+    return out

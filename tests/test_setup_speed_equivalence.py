@@ -750,3 +750,53 @@ def test_split_boundary_faces_on_a_face_split_twice():
         F, np.array([0, 1]), np.array([1, 4]), np.array([0.5, 0.5]), len(V)
     )
     assert len(out) == len(F) + 2 and sorted(set(parent.tolist())) == list(range(len(F)))
+
+
+# -- the start's bulge and the values a solver keeps between solves ----------------------------
+
+
+def test_lifted_areas_are_face_areas_of_the_lifted_guest_to_the_bit():
+    from igljoin.frames import face_areas
+    from igljoin.start import _lifted_areas
+
+    rng = np.random.default_rng(3)
+    s = paper_sample("partial_patch", "longer", resolution=0.5)
+    V, F = s.guest.V, s.guest.F
+    lift = rng.normal(size=V.shape)
+    out = np.empty(len(F))
+    for a in (0.0, 1e-3, 0.37, 5.0, rng.uniform(0, 10)):
+        got = _lifted_areas(V, lift, a, F, out)
+        want = face_areas(V + a * lift, F)
+        assert np.array_equal(got, want)
+        assert got.sum() == want.sum()
+
+
+def _resolve_targets(targets, degrees):
+    c = targets.mean(axis=0)
+    t = np.radians(degrees)
+    R = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(t), -np.sin(t)], [0.0, np.sin(t), np.cos(t)]])
+    return (targets - c) @ R.T + c
+
+
+@pytest.mark.parametrize("key", [("partial_patch", "longer"), ("end_to_end", "equal")])
+def test_a_re_solve_reuses_the_kept_values_and_equals_a_fresh_solver(key):
+    """What a solver keeps (rest measures, bulge basis, bump) changes no bit of a re-solve."""
+    s = paper_sample(*key, resolution=0.5)
+    solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    first = solver.solve()
+    T = _resolve_targets(first.seam_targets, 1.0)
+    kept = dict(solver._rest.made)
+    assert {k[0] for k in kept} == {"fit", "input", "areas", "lengths", "folds"}
+    basis, bump = solver._bulge_basis, solver._bump
+    if key[0] == "partial_patch":  # a disk guest longer than its curve: lifted at the start
+        assert basis is not None and bump is not None
+    again = solver.solve(T)
+    warm = solver.solve(T, start=first)
+    assert all(solver._rest.made[k] is v for k, v in kept.items())
+    assert solver._bulge_basis is basis and solver._bump is bump
+    fresh = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    for got, want in ((again, fresh.solve(T)), (warm, fresh.solve(T, start=first))):
+        assert got.iterations == want.iterations
+        assert np.array_equal(got.guest.V, want.guest.V)
+        assert got.metrics == {**want.metrics, "time_seconds": got.metrics["time_seconds"]}
+        assert [w.code for w in got.warnings] == [w.code for w in want.warnings]
