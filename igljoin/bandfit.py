@@ -306,18 +306,19 @@ def band_fit(
         idx[valid] = near[np.fromiter(chain.from_iterable(hits), dtype=np.int64, count=total)]
     valid &= idx != curve[:, None]
     # on the same sheet of the surface as the curve vertex
-    n0 = VN[curve]
-    valid &= np.einsum("kmj,kj->km", VN[idx], n0) > _SAME_SHEET_COS
+    n0, VNb = VN[curve], VN[idx]
+    valid &= np.einsum("kmj,kj->km", VNb, n0) > _SAME_SHEET_COS
     D = V[idx] - A[:, None, :]
     w_area = np.where(valid, 1.0, 0.0)
-    n0 = unit(np.einsum("km,kmj->kj", w_area, VN[idx]) + n0)
+    n0 = unit(np.einsum("km,kmj->kj", w_area, VNb) + n0)
     g0 = unit(np.cross(n0, T))
     # into the surface: the faces lie to the left of their own boundary edges (seen
     # along the normal), so the curve's order against theirs fixes the side exactly;
     # where no curve edge is a mesh edge, the band's centroid decides
     side = _orientation_side(F, curve, closed)
     unknown = side == 0
-    side[unknown] = np.sign(np.einsum("km,kmj,kj->k", w_area, D, g0))[unknown]
+    if unknown.any():
+        side[unknown] = np.sign(np.einsum("km,kmj,kj->k", w_area, D, g0))[unknown]
     g0[side < 0] *= -1.0
     along = min(band, along_curve_reach(P, closed, n0, band))
     u = np.einsum("kmj,kj->km", D, T) / band

@@ -85,8 +85,9 @@ def default_band(seam: SeamGeometry, guest_curve: np.ndarray | None = None) -> f
         median_edge_near(seam.Vh, seam.Fh, seam.host_curve),
         median_edge_near(seam.Vg, seam.Fg, guest_curve),
     )
-    used = np.unique(seam.Fg)
-    Vu = seam.Vg[used] if used.size else np.zeros((1, 3))
+    used = np.zeros(len(seam.Vg), dtype=bool)
+    used[np.asarray(seam.Fg, dtype=np.int64).reshape(-1)] = True  # the vertices of its faces
+    Vu = seam.Vg[used] if used.any() else np.zeros((1, 3))
     # twice the largest distance from the centroid: unlike a bounding box's
     # diagonal, it does not change when the guest is turned
     size = 2.0 * float(np.linalg.norm(Vu - Vu.mean(axis=0), axis=1).max())

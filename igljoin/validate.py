@@ -66,9 +66,15 @@ def check_coordinates(mesh: Mesh, role: str) -> None:
             "accepts: areas and squared lengths of such coordinates overflow float64; rescale "
             "the mesh to its real units (e.g. millimetres)"
         )
-    F = mesh.F
-    e = np.linalg.norm(mesh.V[F[:, [1, 2, 0]]] - mesh.V[F], axis=2).reshape(-1)
-    edge = float(np.median(e))
+    # the length of every face side, as np.linalg.norm of its vector (squares summed
+    # left to right), on contiguous coordinate rows
+    VT = np.ascontiguousarray(np.asarray(mesh.V, dtype=np.float64).T)  # (3, n)
+    FT = np.ascontiguousarray(np.asarray(mesh.F, dtype=np.int64).T)  # (3, m)
+    P = [np.take(VT, FT[c], axis=1) for c in range(3)]  # (3, m) corners
+    sq = [
+        (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2] for d in (P[1] - P[0], P[2] - P[1], P[0] - P[2])
+    ]
+    edge = float(np.median(np.sqrt(np.concatenate(sq))))
     resolution = mag * np.finfo(np.float64).eps
     if edge > 0 and resolution > edge * 10.0**-MIN_EDGE_DIGITS:
         digits = max(0.0, np.log10(edge / resolution)) if resolution > 0 else 16.0
