@@ -4,7 +4,9 @@ The metrics, the weld and its self-intersection count were sped up by
 computing on contiguous coordinate arrays, on the faces at a curve only, on
 cached host values, on candidate pairs instead of all pairs, with the manifold
 checks of :mod:`igljoin.topology` instead of libigl's, and with a floating-point
-pre-check that keeps clean faces away from CGAL. Each test runs a fast path next
+pre-check that keeps clean faces away from CGAL; a summary sorts its values once,
+and a band fit builds its design columns and normal equations in compiled loops
+that take the einsums' products and sums in order. Each test runs a fast path next
 to a reference computation (the plain code it replaced, kept below, or libigl /
 CGAL themselves) and compares. Tolerances are zero throughout: the fast paths perform the same
 floating-point operations in the same order (or select among identical
