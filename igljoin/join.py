@@ -224,13 +224,15 @@ class JoinSolver:
         # §4.2–4.4: shape, stretch and one smooth-join term per seam
         curves = [p.host_curve for p in self.pairs]
         self.bands = seam_bands(opt, host, c, curves, self.parts)
+        # the rest guest's measures (see join_result); its band fits serve the terms too
+        self._rest = RestMeasures(c, self.E)
         built = build_terms(
             TermInputs(
-                opt, c, self.E, self.guest, host, self.host_values, curves, self.parts, self.bands
+                opt, c, self.E, self.guest, host, self.host_values, curves, self.parts,
+                self.bands, self._rest.fit,
             )
-        )
+        )  # fmt: skip
         self.built, self.terms = built, built.terms
-        self._rest = RestMeasures(c, self.E)  # the rest guest's measures (see join_result)
         t2 = time.perf_counter()
         # §4.5: the seam vertices fixed in one factorization
         self.solver = LocalGlobalSolver(self.terms, len(c.V), c.seam, opt.linear_solver)

@@ -9,12 +9,13 @@ tilted by the crease the join keeps (``smooth_mode="band"``,
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from . import band_targets
-from .bandfit import band_fit
+from .bandfit import BandFit, band_fit
 from .boundary import SelectedCurve
 from .correspond import Correspondence
 from .crease import default_band
@@ -171,6 +172,7 @@ def _band_term(
     host_values: HostValues,
     band: float,
     angle: float | None,
+    rest_fit: Callable[[np.ndarray, bool, float], BandFit],
 ) -> tuple[SmoothJoinTerm, np.ndarray]:
     """The band smooth-join term of one seam and the crease it removes (degrees, shape (s,)).
 
@@ -182,7 +184,7 @@ def _band_term(
     host_fit = host_values.band_fit(curve, band)
     edge, t = part.host_edge, part.host_edge_t
     at_seam = interpolate_frames(host_fit.frames, edge, t, curve.closed)
-    guest_fit = band_fit(corr.V, corr.F, part.seam, curve.closed, band)
+    guest_fit = rest_fit(part.seam, curve.closed, band)
     targets = _at_points(host.V[curve.indices], edge, t, curve.closed)
     host_se = _at_points(host_fit.slope_error, edge, t, curve.closed)
     kept, removed = band_targets.kept_elevation(
@@ -275,6 +277,10 @@ class TermInputs:
         Each seam's own correspondence.
     bands : list of float
         Each seam's band width (:func:`seam_bands`).
+    rest_fit : callable, optional
+        ``rest_fit(curve, closed, band)``: the rest guest's band fit along
+        ``curve`` (``band_fit(corr.V, corr.F, curve, closed, band)``), from a
+        store the solver's measures share (default: made here).
     """
 
     options: JoinOptions
@@ -286,6 +292,7 @@ class TermInputs:
     curves: list
     parts: list
     bands: list
+    rest_fit: Callable[[np.ndarray, bool, float], BandFit] | None = None
 
 
 def _shape_terms(inputs: TermInputs) -> list[tuple[Term, np.ndarray | None]]:
@@ -311,8 +318,11 @@ def _smooth_terms(inputs: TermInputs) -> list[tuple[Term, np.ndarray | None]]:
     if opt.smooth_mode != "band":
         return [(_frame_term(opt, c, part, hc, inputs.host), None) for hc, part in seams]
     angles = join_angles(opt, len(seams))
+    rest_fit = inputs.rest_fit or (
+        lambda curve, closed, band: band_fit(c.V, c.F, curve, closed, band)
+    )
     return [
-        _band_term(opt, c, part, hc, inputs.host, inputs.host_values, band, angle)
+        _band_term(opt, c, part, hc, inputs.host, inputs.host_values, band, angle, rest_fit)
         for (hc, part), band, angle in zip(seams, inputs.bands, angles)
     ]
 

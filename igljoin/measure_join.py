@@ -60,11 +60,16 @@ class RestMeasures:
             self.made[key] = make()
         return self.made[key]
 
-    def fit(self, at_host: np.ndarray, closed: bool, band: float) -> BandFit:
-        """The rest guest's band fit along ``at_host`` (serves both band measures)."""
+    def fit(self, curve: np.ndarray, closed: bool, band: float) -> BandFit:
+        """The rest guest's band fit along ``curve``, shape (k,) (serves both band measures).
+
+        The smooth-join terms take theirs, along the whole seam, from here
+        too: where every seam vertex lies on a host curve vertex the two
+        are one fit.
+        """
         c = self.corr
-        key = ("fit", at_host.tobytes(), bool(closed), float(band))
-        return self._kept(key, lambda: band_fit(c.V, c.F, at_host, closed, band))
+        key = ("fit", np.asarray(curve).tobytes(), bool(closed), float(band))
+        return self._kept(key, lambda: band_fit(c.V, c.F, curve, closed, band))
 
     def input_crease(
         self, seam: SeamGeometry, band: float, host_fit: BandFit, rest_fit: BandFit

@@ -12,6 +12,7 @@ No tolerance is used anywhere: every comparison is exact.
 from __future__ import annotations
 
 import dataclasses
+import importlib
 
 import igl
 import numpy as np
@@ -800,3 +801,25 @@ def test_a_re_solve_reuses_the_kept_values_and_equals_a_fresh_solver(key):
         assert np.array_equal(got.guest.V, want.guest.V)
         assert got.metrics == {**want.metrics, "time_seconds": got.metrics["time_seconds"]}
         assert [w.code for w in got.warnings] == [w.code for w in want.warnings]
+
+
+@pytest.mark.parametrize(
+    ("key", "fits"), [(("partial_patch", "equal"), 1), (("end_to_end", "equal"), 2)]
+)
+def test_the_terms_and_the_measures_share_the_rest_guests_band_fits(key, fits, monkeypatch):
+    """A patch's seam lies on host vertices only: its terms and its measures use one fit."""
+    from igljoin import bandfit
+
+    s = paper_sample(*key, resolution=0.5)
+    made = []
+    fit = bandfit.band_fit
+    monkeypatch.setattr(
+        bandfit, "band_fit", lambda V, *a, **k: made.append(len(V)) or fit(V, *a, **k)
+    )
+    for name in ("igljoin.join_terms", "igljoin.measure_join", "igljoin.host_values"):
+        monkeypatch.setattr(importlib.import_module(name), "band_fit", bandfit.band_fit)
+    solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    solver.solve()
+    guest_fits = sum(n == len(solver.corr.V) for n in made)
+    assert guest_fits == fits == sum(k[0] == "fit" for k in solver._rest.made)
+    assert len(made) == fits + 1  # and one of the host
