@@ -31,6 +31,8 @@ __all__ = [
     "stretch_local",
     "smooth_local",
     "incidence",
+    "dot",
+    "lbfgs_pair",
     "lbfgs_first_loop",
     "lbfgs_second_loop",
 ]
@@ -434,35 +436,139 @@ def smooth_local(
     return energy
 
 
+@nb.njit(cache=True, inline="always")
+def _dot4(a, b, N):  # pragma: no cover - compiled
+    """``Σ a[i] b[i]`` over the first ``N`` entries of two 1-D arrays.
+
+    Four partial sums, so that the loop is not bound by the latency of one
+    chain of additions; the result differs from a sequential sum by rounding.
+    """
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    stop = N - N % 4
+    for i in range(0, stop, 4):
+        s0 += a[i] * b[i]
+        s1 += a[i + 1] * b[i + 1]
+        s2 += a[i + 2] * b[i + 2]
+        s3 += a[i + 3] * b[i + 3]
+    for i in range(stop, N):
+        s0 += a[i] * b[i]
+    return (s0 + s1) + (s2 + s3)
+
+
+@nb.njit(cache=True)
+def dot(a, b):  # pragma: no cover - compiled
+    """``Σ a b`` of two C-contiguous arrays of one shape.
+
+    Single-threaded on purpose: a BLAS ``ddot`` of more than about 10⁴
+    entries wakes a pool of threads, which on a machine whose cores are
+    busy costs milliseconds per call instead of microseconds.
+    """
+    x = a.ravel()
+    y = b.ravel()
+    return _dot4(x, y, x.shape[0])
+
+
+@nb.njit(cache=True)
+def lbfgs_pair(S, Y, slot, x_new, x, g_new, g):  # pragma: no cover - compiled
+    """Write ``s = x_new − x`` and ``y = g_new − g`` into row ``slot`` of ``S``, ``Y``.
+
+    ``S``, ``Y`` have shape (m, N); the four iterates are C-contiguous arrays
+    of N entries. Returns ``(sᵀy, yᵀy)``.
+    """
+    a = x_new.ravel()
+    b = x.ravel()
+    c = g_new.ravel()
+    e = g.ravel()
+    sy = 0.0
+    yy = 0.0
+    for i in range(a.shape[0]):
+        si = a[i] - b[i]
+        yi = c[i] - e[i]
+        S[slot, i] = si
+        Y[slot, i] = yi
+        sy += si * yi
+        yy += yi * yi
+    return sy, yy
+
+
 @nb.njit(cache=True)
 def lbfgs_first_loop(q, S, Y, rho, order, alpha):  # pragma: no cover - compiled
     """First half of the L-BFGS two-loop recursion, newest pair first.
 
     ``q`` (N,) is updated in place to ``q − Σ α_k y_k``; ``S``, ``Y`` (m, N)
     hold the pairs in the slots ``order`` (oldest first), ``rho`` (m,) their
-    ``1 / sᵀy``; ``alpha`` (m,) receives the coefficients by slot.
+    ``1 / sᵀy``; ``alpha`` (m,) receives the coefficients by slot. Each
+    update of ``q`` and the next pair's product with it share one pass.
     """
     N = q.shape[0]
-    for k in range(order.shape[0] - 1, -1, -1):
-        slot = order[k]
-        a = 0.0
-        for i in range(N):
-            a += S[slot, i] * q[i]
-        a *= rho[slot]
+    k = order.shape[0] - 1
+    if k < 0:
+        return
+    slot = order[k]
+    a = rho[slot] * _dot4(S[slot], q, N)
+    while k >= 0:
         alpha[slot] = a
-        for i in range(N):
-            q[i] -= a * Y[slot, i]
+        Yk = Y[slot]
+        if k == 0:
+            for i in range(N):
+                q[i] -= a * Yk[i]
+            break
+        nxt = order[k - 1]
+        Sn = S[nxt]
+        s0 = 0.0
+        s1 = 0.0
+        stop = N - N % 2
+        for i in range(0, stop, 2):
+            q0 = q[i] - a * Yk[i]
+            q1 = q[i + 1] - a * Yk[i + 1]
+            q[i] = q0
+            q[i + 1] = q1
+            s0 += Sn[i] * q0
+            s1 += Sn[i + 1] * q1
+        for i in range(stop, N):
+            q[i] -= a * Yk[i]
+            s0 += Sn[i] * q[i]
+        k -= 1
+        slot = nxt
+        a = rho[slot] * (s0 + s1)
 
 
 @nb.njit(cache=True)
 def lbfgs_second_loop(z, S, Y, rho, order, alpha):  # pragma: no cover - compiled
-    """Second half of the two-loop recursion, oldest pair first (``z`` (N,) in place)."""
+    """Second half of the two-loop recursion, oldest pair first (``z`` (N,) in place).
+
+    Each update of ``z`` and the next pair's product with it share one pass.
+    """
     N = z.shape[0]
-    for k in range(order.shape[0]):
-        slot = order[k]
-        b = 0.0
-        for i in range(N):
-            b += Y[slot, i] * z[i]
+    m = order.shape[0]
+    if m == 0:
+        return
+    slot = order[0]
+    b = _dot4(Y[slot], z, N)
+    for k in range(m):
         c = alpha[slot] - rho[slot] * b
-        for i in range(N):
-            z[i] += c * S[slot, i]
+        Sk = S[slot]
+        if k == m - 1:
+            for i in range(N):
+                z[i] += c * Sk[i]
+            break
+        nxt = order[k + 1]
+        Yn = Y[nxt]
+        s0 = 0.0
+        s1 = 0.0
+        stop = N - N % 2
+        for i in range(0, stop, 2):
+            z0 = z[i] + c * Sk[i]
+            z1 = z[i + 1] + c * Sk[i + 1]
+            z[i] = z0
+            z[i + 1] = z1
+            s0 += Yn[i] * z0
+            s1 += Yn[i + 1] * z1
+        for i in range(stop, N):
+            z[i] += c * Sk[i]
+            s0 += Yn[i] * z[i]
+        slot = nxt
+        b = s0 + s1

@@ -340,16 +340,16 @@ class LocalGlobalSolver:
                 clock["model"] = clock.get("model", 0.0) + time.perf_counter() - t0
             if acceleration > 0 and memory.size:
                 d = -memory.apply(g, back_solve)
-                gd = float(np.vdot(g, d))
+                gd = kernels.dot(g, d)
                 if not gd < 0.0:
                     memory.clear()
                     stats["restarts"] += 1
                     d = -back_solve(g)
-                    gd = float(np.vdot(g, d))
+                    gd = kernels.dot(g, d)
             else:
                 # the plain global step
                 d = -back_solve(g)
-                gd = float(np.vdot(g, d))
+                gd = kernels.dot(g, d)
             t = 1.0
             for _ in range(_MAX_BACKTRACKS + 1):
                 x_new = x + t * d
@@ -372,7 +372,7 @@ class LocalGlobalSolver:
                 x_new = x + d
                 state_new, e_new, g_new = local(x_new, hint)
             if acceleration > 0:
-                memory.push(x_new - x, g_new - g)
+                memory.push(x_new, x, g_new, g)
             move = t * float(np.abs(d).max())
             x, e, g, state = x_new, e_new, g_new, state_new
             energy.append(e)
@@ -408,16 +408,24 @@ class _Memory:
         Pairs kept (0: none).
     shape : tuple
         Shape of one iterate, e.g. ``(n_free, 3)``.
+
+    Notes
+    -----
+    The buffers hold ``m + 1`` rows: a new pair is written into a free row
+    and only then accepted or refused, so a refused pair never overwrites
+    the oldest one kept.
     """
 
     def __init__(self, m: int, shape: tuple):
         N = int(np.prod(shape))
+        rows = m + 1 if m > 0 else 0
         self.m = m
-        self.S = np.empty((m, N))
-        self.Y = np.empty((m, N))
-        self.rho = np.empty(m)
-        self.alpha = np.empty(m)
+        self.S = np.empty((rows, N))
+        self.Y = np.empty((rows, N))
+        self.rho = np.empty(rows)
+        self.alpha = np.empty(rows)
         self.order: list[int] = []  # slots, oldest first
+        self.unused = list(range(rows))
 
     @property
     def size(self) -> int:
@@ -427,20 +435,20 @@ class _Memory:
     def clear(self) -> None:
         """Forget every pair."""
         self.order.clear()
+        self.unused = list(range(len(self.rho)))
 
-    def push(self, s: np.ndarray, y: np.ndarray) -> None:
-        """Keep the pair if its curvature ``sᵀy`` is positive (else BFGS would break)."""
-        sy = float(np.vdot(s, y))
-        if not (sy > 1e-12 * float(np.vdot(y, y)) and sy > 0.0):
+    def push(self, x_new: np.ndarray, x: np.ndarray, g_new: np.ndarray, g: np.ndarray) -> None:
+        """Keep the pair ``s = x_new − x``, ``y = g_new − g`` if its curvature ``sᵀy`` is
+        positive (else BFGS would break); all four are C-contiguous, shaped like an iterate."""
+        slot = self.unused[-1]
+        sy, yy = kernels.lbfgs_pair(self.S, self.Y, slot, x_new, x, g_new, g)
+        if not (sy > 1e-12 * yy and sy > 0.0):
             return
-        if len(self.order) < self.m:
-            slot = len(self.order)
-        else:
-            slot = self.order.pop(0)
-        self.S[slot] = s.reshape(-1)
-        self.Y[slot] = y.reshape(-1)
+        self.unused.pop()
         self.rho[slot] = 1.0 / sy
         self.order.append(slot)
+        if len(self.order) > self.m:
+            self.unused.append(self.order.pop(0))
 
     def apply(self, g: np.ndarray, back_solve) -> np.ndarray:
         """The inverse-Hessian model applied to ``g`` (L-BFGS two-loop recursion).
