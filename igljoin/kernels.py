@@ -30,6 +30,7 @@ __all__ = [
     "shape_residuals",
     "stretch_local",
     "smooth_local",
+    "band_local",
     "incidence",
     "dot",
     "lbfgs_pair",
@@ -367,6 +368,40 @@ def stretch_local(d, E, k, rest_length, rest, R, G):  # pragma: no cover - compi
     return energy
 
 
+@nb.njit(cache=True, inline="always")
+def _wedge_target(d0, d1, d2, n0, n1, n2, o0, o1, o2, tolerance):  # pragma: no cover
+    """Closest point of ``d`` in the half-plane continuing the host, widened to a wedge.
+
+    The half-plane is ``{x : x·n = 0, x·o ≥ 0}`` (unit normal ``n``, outward
+    direction ``o``); a ``tolerance`` > 0 (radians) widens it to the wedge
+    of that half-angle about it. Returns the three coordinates.
+    """
+    z = d0 * n0 + d1 * n1 + d2 * n2
+    p0 = d0 - z * n0
+    p1 = d1 - z * n1
+    p2 = d2 - z * n2
+    po = p0 * o0 + p1 * o1 + p2 * o2
+    if po < 0.0:
+        p0 -= po * o0
+        p1 -= po * o1
+        p2 -= po * o2
+    if tolerance == 0.0:
+        return p0, p1, p2
+    ca = math.cos(tolerance)
+    sa = math.sin(tolerance)
+    plen = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+    if abs(z) <= math.tan(tolerance) * plen:
+        return p0 + z * n0, p1 + z * n1, p2 + z * n2
+    sc = max(plen * ca + abs(z) * sa, 0.0)
+    inv = 1.0 / plen if plen > 0.0 else 1.0
+    sz = sa if z > 0.0 else (-sa if z < 0.0 else 0.0)
+    return (
+        sc * (ca * p0 * inv + sz * n0),
+        sc * (ca * p1 * inv + sz * n1),
+        sc * (ca * p2 * inv + sz * n2),
+    )
+
+
 @nb.njit(cache=True)
 def smooth_local(
     X, pairs, normal, outward, weights, tolerance, fixed_target, G
@@ -380,9 +415,6 @@ def smooth_local(
     to a wedge of half-angle ``tolerance`` radians when it is positive.
     """
     fixed = fixed_target.shape[0] > 0
-    ca = math.cos(tolerance)
-    sa = math.sin(tolerance)
-    ta = math.tan(tolerance)
     energy = 0.0
     for p in range(pairs.shape[0]):
         s = pairs[p, 0]
@@ -395,44 +427,58 @@ def smooth_local(
             t1 = fixed_target[p, 1]
             t2 = fixed_target[p, 2]
         else:
-            n0 = normal[p, 0]
-            n1 = normal[p, 1]
-            n2 = normal[p, 2]
-            z = d0 * n0 + d1 * n1 + d2 * n2
-            p0 = d0 - z * n0
-            p1 = d1 - z * n1
-            p2 = d2 - z * n2
-            o0 = outward[p, 0]
-            o1 = outward[p, 1]
-            o2 = outward[p, 2]
-            po = p0 * o0 + p1 * o1 + p2 * o2
-            if po < 0.0:
-                p0 -= po * o0
-                p1 -= po * o1
-                p2 -= po * o2
-            if tolerance == 0.0:
-                t0 = p0
-                t1 = p1
-                t2 = p2
-            else:
-                plen = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
-                if abs(z) <= ta * plen:
-                    t0 = p0 + z * n0
-                    t1 = p1 + z * n1
-                    t2 = p2 + z * n2
-                else:
-                    sc = max(plen * ca + abs(z) * sa, 0.0)
-                    inv = 1.0 / plen if plen > 0.0 else 1.0
-                    sz = sa if z > 0.0 else (-sa if z < 0.0 else 0.0)
-                    t0 = sc * (ca * p0 * inv + sz * n0)
-                    t1 = sc * (ca * p1 * inv + sz * n1)
-                    t2 = sc * (ca * p2 * inv + sz * n2)
+            t0, t1, t2 = _wedge_target(
+                d0, d1, d2, normal[p, 0], normal[p, 1], normal[p, 2],
+                outward[p, 0], outward[p, 1], outward[p, 2], tolerance,
+            )  # fmt: skip
         r0 = d0 - t0
         r1 = d1 - t1
         r2 = d2 - t2
         wp = weights[p]
         energy += wp * (r0 * r0 + r1 * r1 + r2 * r2)
         _add_opposite(G, f, s, wp * r0, wp * r1, wp * r2)
+    return energy
+
+
+@nb.njit(cache=True)
+def band_local(X, Kp, Ki, Kx, normal, outward, weights, tolerance, G):  # pragma: no cover
+    """Band smooth-join term: return the energy, add the half-gradient ``Kᵀ W r``.
+
+    Row ``p`` of the sparse fit ``K`` (CSR arrays ``Kp``, ``Ki``, ``Kx``) gives
+    the guest's direction off seam vertex ``p``, ``d = (K X)_p``; its target
+    is the closest point in the half-plane (normal ``normal[p]``, outward
+    ``outward[p]``) widened to a wedge of half-angle ``tolerance[p]``; its
+    residual ``r = d − target`` weighs ``weights[p]``.
+    """
+    energy = 0.0
+    for p in range(Kp.shape[0] - 1):
+        d0 = 0.0
+        d1 = 0.0
+        d2 = 0.0
+        for k in range(Kp[p], Kp[p + 1]):
+            j = Ki[k]
+            a = Kx[k]
+            d0 += a * X[j, 0]
+            d1 += a * X[j, 1]
+            d2 += a * X[j, 2]
+        t0, t1, t2 = _wedge_target(
+            d0, d1, d2, normal[p, 0], normal[p, 1], normal[p, 2],
+            outward[p, 0], outward[p, 1], outward[p, 2], tolerance[p],
+        )  # fmt: skip
+        wp = weights[p]
+        r0 = d0 - t0
+        r1 = d1 - t1
+        r2 = d2 - t2
+        energy += wp * (r0 * r0 + r1 * r1 + r2 * r2)
+        r0 *= wp
+        r1 *= wp
+        r2 *= wp
+        for k in range(Kp[p], Kp[p + 1]):
+            j = Ki[k]
+            a = Kx[k]
+            G[j, 0] += a * r0
+            G[j, 1] += a * r1
+            G[j, 2] += a * r2
     return energy
 
 

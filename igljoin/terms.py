@@ -611,9 +611,7 @@ class SmoothJoinTerm(Term):
         Band mode: seam vertices the term acts on (default all); the others
         keep a row of weight 0.
     compiled : bool
-        Robust and paper modes: compiled local step (default) or the numpy
-        reference path. Band mode has only the numpy path (its rows are a
-        sparse fit, one product per step).
+        Compiled local step (default) or the numpy reference path.
     """
 
     name = "smooth"
@@ -638,6 +636,7 @@ class SmoothJoinTerm(Term):
             self._init_band(n, frames, weight, fit)
             if active is not None:
                 self.weights = np.where(np.asarray(active, dtype=bool), self.weights, 0.0)
+            self.compiled = bool(compiled)
             return
         self.tolerance = float(tolerance)
         on_seam = np.zeros(n, dtype=bool)
@@ -688,13 +687,23 @@ class SmoothJoinTerm(Term):
         self.outward = np.ascontiguousarray(-frames.inward, dtype=np.float64)
         self.weights = np.full(self.K.shape[0], float(weight) * ROWS_PER_BAND_ROW)
         self.preconditioner_scale = 0.5
-        self.compiled = False
+        # arrays of the compiled local step (igljoin.kernels.band_local)
+        self._Kp = self.K.indptr.astype(np.int64)
+        self._Ki = self.K.indices.astype(np.int64)
+        self._Kx = np.ascontiguousarray(self.K.data, dtype=np.float64)
+        self._tol_c = np.ascontiguousarray(self.tolerance, dtype=np.float64)
 
     def local(self, state: LocalState) -> tuple[float, np.ndarray]:
         """Energy and half gradient (see :meth:`Term.local`), compiled when available."""
         if not self.compiled:
             return super().local(state)
         G = np.zeros((state.X.shape[0], 3))
+        if self.mode == "band":
+            e = kernels.band_local(
+                state.X, self._Kp, self._Ki, self._Kx, self.normal, self.outward,
+                np.ascontiguousarray(self.weights, dtype=np.float64), self._tol_c, G,
+            )  # fmt: skip
+            return float(e), G
         e = kernels.smooth_local(
             state.X, self.pairs, self.normal, self.outward, self.weights, self.tolerance,
             self._fixed_c, G,
