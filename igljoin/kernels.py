@@ -26,7 +26,7 @@ import numpy as np
 
 __all__ = [
     "edge_vectors",
-    "shape_rotations",
+    "shape_local",
     "shape_residuals",
     "stretch_local",
     "smooth_local",
@@ -194,16 +194,20 @@ def _newton_rotation(A, R):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True)
-def shape_rotations(
-    X, d, Lp, Li, Lx, delta, rest_edges, inc_ptr, inc_edges, mu, hint, LX, A, R
+def shape_local(
+    X, E, Lp, Li, Lx, delta, rest_edges, inc_ptr, inc_edges, mu, w, hint, LX, A, R, G
 ):  # pragma: no cover - compiled
-    """First half of the rotation-aware Laplacian term: covariances and rotations.
+    """The rotation-aware Laplacian term in one call: rotations, energy, half-gradient.
+
+    A pass over the vertices computes ``l(p′)_v``, the covariance and the
+    rotation (Newton on SO(3) from the hint); if every rotation settled,
+    :func:`shape_residuals` follows in the same call.
 
     Parameters
     ----------
     X : ndarray, shape (n, 3)
-    d : ndarray, shape (e, 3)
-        Edge vectors at ``X``.
+    E : ndarray of int64, shape (e, 2)
+        Edges; ``d_e = X[E[e, 0]] − X[E[e, 1]]``.
     Lp, Li, Lx : ndarray
         CSR arrays of the Laplacian ``L`` (n × n).
     delta : ndarray, shape (n, 3)
@@ -213,6 +217,8 @@ def shape_rotations(
         Edges incident to each vertex (:func:`incidence`).
     mu : float
         Weight of the one-ring edges.
+    w : float
+        Weight of the term.
     hint : ndarray, shape (n, 3, 3) or (0, 3, 3)
         Starting rotations (empty: each vertex starts from the previous
         vertex's rotation, usually a neighbour's).
@@ -222,14 +228,25 @@ def shape_rotations(
         Output: covariances ``A_v = l(p′)_v δ_vᵀ + μ Σ_e d_e e0_eᵀ``.
     R : ndarray, shape (n, 3, 3)
         Output: rotations maximising ``tr(R_vᵀ A_v)`` where Newton settled.
+    G : ndarray, shape (n, 3)
+        Half-gradient, added to when every rotation settled.
 
     Returns
     -------
-    ndarray of bool, shape (n,)
-        Vertices where Newton did not settle at a maximum; their rotations
-        are left to the caller (libigl's SVD fit).
+    energy : float
+        The term's energy; 0 when some rotation did not settle.
+    failed : ndarray of bool, shape (n,)
+        Vertices where Newton did not settle at a maximum. If there are
+        any, their rotations, then :func:`shape_residuals`, are left to the
+        caller (libigl's SVD fit).
     """
     n = X.shape[0]
+    use_hint = hint.shape[0] == n
+    failed = np.zeros(n, dtype=np.bool_)
+    any_failed = False
+    Rv = np.zeros((3, 3))
+    for b in range(3):
+        Rv[b, b] = 1.0
     for v in range(n):
         s0 = 0.0
         s1 = 0.0
@@ -243,20 +260,17 @@ def shape_rotations(
         LX[v, 0] = s0
         LX[v, 1] = s1
         LX[v, 2] = s2
-    use_hint = hint.shape[0] == n
-    failed = np.zeros(n, dtype=np.bool_)
-    Rv = np.zeros((3, 3))
-    for b in range(3):
-        Rv[b, b] = 1.0
-    for v in range(n):
         Av = A[v]
-        for b in range(3):
-            for a in range(3):
-                Av[b, a] = LX[v, b] * delta[v, a]
+        for a in range(3):
+            Av[0, a] = s0 * delta[v, a]
+            Av[1, a] = s1 * delta[v, a]
+            Av[2, a] = s2 * delta[v, a]
         for k in range(inc_ptr[v], inc_ptr[v + 1]):
             e = inc_edges[k]
+            i = E[e, 0]
+            j = E[e, 1]
             for b in range(3):
-                db = mu * d[e, b]
+                db = mu * (X[i, b] - X[j, b])
                 for a in range(3):
                     Av[b, a] += db * rest_edges[e, a]
         if use_hint:
@@ -269,20 +283,23 @@ def shape_rotations(
                     R[v, b, a] = Rv[b, a]
         else:
             failed[v] = True
+            any_failed = True
             for b in range(3):
                 for a in range(3):
                     Rv[b, a] = 1.0 if a == b else 0.0
-    return failed
+    if any_failed:
+        return 0.0, failed
+    return shape_residuals(X, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G), failed
 
 
 @nb.njit(cache=True)
-def shape_residuals(LX, d, Lp, Li, Lx, delta, E, rest_edges, mu, w, R, G):  # pragma: no cover
+def shape_residuals(X, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G):  # pragma: no cover
     """Second half of the rotation-aware Laplacian term: energy and half-gradient.
 
     With the rotations ``R`` (n, 3, 3) fitted, returns the energy
     ``w (Σ ‖l(p′)_v − R_v δ_v‖² + μ Σ_e (‖d_e − R_i e0‖² + ‖d_e − R_j e0‖²))``
-    and adds ``w (Lᵀ r + μ Dᵀ (r0 + r1))`` to ``G`` (n, 3). Other arguments as
-    in :func:`shape_rotations`; ``E`` (e, 2) are the edges.
+    and adds ``w (Lᵀ r + μ Dᵀ (r0 + r1))`` to ``G`` (n, 3). Arguments as in
+    :func:`shape_local`.
     """
     n = LX.shape[0]
     energy_lap = 0.0
@@ -312,8 +329,9 @@ def shape_residuals(LX, d, Lp, Li, Lx, delta, E, rest_edges, mu, w, R, G):  # pr
         s1 = 0.0
         s2 = 0.0
         for c in range(3):
-            ri = d[e, c] - (R[i, c, 0] * x0 + R[i, c, 1] * x1 + R[i, c, 2] * x2)
-            rj = d[e, c] - (R[j, c, 0] * x0 + R[j, c, 1] * x1 + R[j, c, 2] * x2)
+            dc = X[i, c] - X[j, c]
+            ri = dc - (R[i, c, 0] * x0 + R[i, c, 1] * x1 + R[i, c, 2] * x2)
+            rj = dc - (R[j, c, 0] * x0 + R[j, c, 1] * x1 + R[j, c, 2] * x2)
             energy_edges += ri * ri + rj * rj
             if c == 0:
                 s0 = ri + rj
@@ -326,21 +344,21 @@ def shape_residuals(LX, d, Lp, Li, Lx, delta, E, rest_edges, mu, w, R, G):  # pr
 
 
 @nb.njit(cache=True)
-def stretch_local(d, E, k, rest_length, rest, R, G):  # pragma: no cover - compiled
+def stretch_local(X, E, k, rest_length, rest, R, G):  # pragma: no cover - compiled
     """Edge-length term ``Σ k (|d| − L0)²``: return the energy, add the half-gradient.
 
-    A collapsed edge (``|d| ≤ 1e-12 L0``) is pulled to its rest vector,
-    rotated by its first endpoint's rotation when ``R`` (n, 3, 3) is given
-    (an empty ``R`` leaves it unrotated).
+    ``d_e = X[E[e, 0]] − X[E[e, 1]]``. A collapsed edge (``|d| ≤ 1e-12 L0``)
+    is pulled to its rest vector, rotated by its first endpoint's rotation
+    when ``R`` (n, 3, 3) is given (an empty ``R`` leaves it unrotated).
     """
     rotated = R.shape[0] > 0
     energy = 0.0
     for e in range(E.shape[0]):
         i = E[e, 0]
         j = E[e, 1]
-        d0 = d[e, 0]
-        d1 = d[e, 1]
-        d2 = d[e, 2]
+        d0 = X[i, 0] - X[j, 0]
+        d1 = X[i, 1] - X[j, 1]
+        d2 = X[i, 2] - X[j, 2]
         length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         if length > 1e-12 * max(rest_length[e], 1e-300):
             gap = length - rest_length[e]

@@ -165,9 +165,7 @@ class LocalGlobalSolver:
         e = 0.0
         rhs = np.zeros((self.n, 3))
         for term in self.terms:
-            et, gt = term.local(state)
-            e += et
-            rhs += gt
+            e += term.local_into(state, rhs)
         if not np.isfinite(e):
             raise SolveError(
                 "the solve produced non-finite positions; the guest has degenerate or "
