@@ -33,6 +33,8 @@ __all__ = [
     "band_local",
     "incidence",
     "dot",
+    "place_rows",
+    "take_rows",
     "lbfgs_pair",
     "lbfgs_first_loop",
     "lbfgs_second_loop",
@@ -636,3 +638,25 @@ def lbfgs_second_loop(z, S, Y, rho, order, alpha):  # pragma: no cover - compile
             s0 += Yn[i] * z[i]
         slot = nxt
         b = s0 + s1
+
+
+@nb.njit(cache=True)
+def place_rows(X, rows, values):  # pragma: no cover - compiled
+    """``X[rows] = values`` for ``X`` (n, 3) and ``values`` (len(rows), 3)."""
+    for k in range(rows.shape[0]):
+        r = rows[k]
+        X[r, 0] = values[k, 0]
+        X[r, 1] = values[k, 1]
+        X[r, 2] = values[k, 2]
+
+
+@nb.njit(cache=True)
+def take_rows(G, rows):  # pragma: no cover - compiled
+    """``G[rows]``, shape (len(rows), 3), for ``G`` (n, 3)."""
+    out = np.empty((rows.shape[0], 3))
+    for k in range(rows.shape[0]):
+        r = rows[k]
+        out[k, 0] = G[r, 0]
+        out[k, 1] = G[r, 1]
+        out[k, 2] = G[r, 2]
+    return out

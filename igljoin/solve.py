@@ -289,17 +289,20 @@ class LocalGlobalSolver:
         clock = {"local": 0.0, "solve": 0.0}
         stats = {"local_steps": 0, "back_solves": 0, "rejected": 0, "restarts": 0}
         free, fixed = self.free, self.fixed
-        bc = np.asarray(bc, dtype=np.float64)
+        # (b, 3) rows for the compiled scatter (broadcast as ``X[fixed] = bc`` would)
+        bc = np.ascontiguousarray(
+            np.broadcast_to(np.asarray(bc, dtype=np.float64), (len(fixed), 3))
+        )
 
         def local(x, hint):
             t0 = time.perf_counter()
             X = np.empty((self.n, 3))
-            X[free] = x
-            X[fixed] = bc
+            kernels.place_rows(X, free, x)
+            kernels.place_rows(X, fixed, bc)
             state, e, G = self.local(X, hint)
             clock["local"] += time.perf_counter() - t0
             stats["local_steps"] += 1
-            return state, e, G[free]
+            return state, e, kernels.take_rows(G, free)
 
         def back_solve(v, plain=False):
             # the quasi-Newton steps use the preconditioner P; the plain global step is Q's
