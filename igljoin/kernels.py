@@ -26,11 +26,16 @@ import numpy as np
 
 __all__ = [
     "edge_vectors",
-    "shape_rotations",
+    "shape_local",
     "shape_residuals",
     "stretch_local",
     "smooth_local",
+    "band_local",
     "incidence",
+    "dot",
+    "place_rows",
+    "take_rows",
+    "lbfgs_pair",
     "lbfgs_first_loop",
     "lbfgs_second_loop",
 ]
@@ -191,16 +196,20 @@ def _newton_rotation(A, R):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True)
-def shape_rotations(
-    X, d, Lp, Li, Lx, delta, rest_edges, inc_ptr, inc_edges, mu, hint, LX, A, R
+def shape_local(
+    X, E, Lp, Li, Lx, delta, rest_edges, inc_ptr, inc_edges, mu, w, hint, LX, A, R, G
 ):  # pragma: no cover - compiled
-    """First half of the rotation-aware Laplacian term: covariances and rotations.
+    """The rotation-aware Laplacian term in one call: rotations, energy, half-gradient.
+
+    A pass over the vertices computes ``l(p′)_v``, the covariance and the
+    rotation (Newton on SO(3) from the hint); if every rotation settled,
+    :func:`shape_residuals` follows in the same call.
 
     Parameters
     ----------
     X : ndarray, shape (n, 3)
-    d : ndarray, shape (e, 3)
-        Edge vectors at ``X``.
+    E : ndarray of int64, shape (e, 2)
+        Edges; ``d_e = X[E[e, 0]] − X[E[e, 1]]``.
     Lp, Li, Lx : ndarray
         CSR arrays of the Laplacian ``L`` (n × n).
     delta : ndarray, shape (n, 3)
@@ -210,6 +219,8 @@ def shape_rotations(
         Edges incident to each vertex (:func:`incidence`).
     mu : float
         Weight of the one-ring edges.
+    w : float
+        Weight of the term.
     hint : ndarray, shape (n, 3, 3) or (0, 3, 3)
         Starting rotations (empty: each vertex starts from the previous
         vertex's rotation, usually a neighbour's).
@@ -219,14 +230,25 @@ def shape_rotations(
         Output: covariances ``A_v = l(p′)_v δ_vᵀ + μ Σ_e d_e e0_eᵀ``.
     R : ndarray, shape (n, 3, 3)
         Output: rotations maximising ``tr(R_vᵀ A_v)`` where Newton settled.
+    G : ndarray, shape (n, 3)
+        Half-gradient, added to when every rotation settled.
 
     Returns
     -------
-    ndarray of bool, shape (n,)
-        Vertices where Newton did not settle at a maximum; their rotations
-        are left to the caller (libigl's SVD fit).
+    energy : float
+        The term's energy; 0 when some rotation did not settle.
+    failed : ndarray of bool, shape (n,)
+        Vertices where Newton did not settle at a maximum. If there are
+        any, their rotations, then :func:`shape_residuals`, are left to the
+        caller (libigl's SVD fit).
     """
     n = X.shape[0]
+    use_hint = hint.shape[0] == n
+    failed = np.zeros(n, dtype=np.bool_)
+    any_failed = False
+    Rv = np.zeros((3, 3))
+    for b in range(3):
+        Rv[b, b] = 1.0
     for v in range(n):
         s0 = 0.0
         s1 = 0.0
@@ -240,20 +262,17 @@ def shape_rotations(
         LX[v, 0] = s0
         LX[v, 1] = s1
         LX[v, 2] = s2
-    use_hint = hint.shape[0] == n
-    failed = np.zeros(n, dtype=np.bool_)
-    Rv = np.zeros((3, 3))
-    for b in range(3):
-        Rv[b, b] = 1.0
-    for v in range(n):
         Av = A[v]
-        for b in range(3):
-            for a in range(3):
-                Av[b, a] = LX[v, b] * delta[v, a]
+        for a in range(3):
+            Av[0, a] = s0 * delta[v, a]
+            Av[1, a] = s1 * delta[v, a]
+            Av[2, a] = s2 * delta[v, a]
         for k in range(inc_ptr[v], inc_ptr[v + 1]):
             e = inc_edges[k]
+            i = E[e, 0]
+            j = E[e, 1]
             for b in range(3):
-                db = mu * d[e, b]
+                db = mu * (X[i, b] - X[j, b])
                 for a in range(3):
                     Av[b, a] += db * rest_edges[e, a]
         if use_hint:
@@ -266,20 +285,23 @@ def shape_rotations(
                     R[v, b, a] = Rv[b, a]
         else:
             failed[v] = True
+            any_failed = True
             for b in range(3):
                 for a in range(3):
                     Rv[b, a] = 1.0 if a == b else 0.0
-    return failed
+    if any_failed:
+        return 0.0, failed
+    return shape_residuals(X, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G), failed
 
 
 @nb.njit(cache=True)
-def shape_residuals(LX, d, Lp, Li, Lx, delta, E, rest_edges, mu, w, R, G):  # pragma: no cover
+def shape_residuals(X, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G):  # pragma: no cover
     """Second half of the rotation-aware Laplacian term: energy and half-gradient.
 
     With the rotations ``R`` (n, 3, 3) fitted, returns the energy
     ``w (Σ ‖l(p′)_v − R_v δ_v‖² + μ Σ_e (‖d_e − R_i e0‖² + ‖d_e − R_j e0‖²))``
-    and adds ``w (Lᵀ r + μ Dᵀ (r0 + r1))`` to ``G`` (n, 3). Other arguments as
-    in :func:`shape_rotations`; ``E`` (e, 2) are the edges.
+    and adds ``w (Lᵀ r + μ Dᵀ (r0 + r1))`` to ``G`` (n, 3). Arguments as in
+    :func:`shape_local`.
     """
     n = LX.shape[0]
     energy_lap = 0.0
@@ -309,8 +331,9 @@ def shape_residuals(LX, d, Lp, Li, Lx, delta, E, rest_edges, mu, w, R, G):  # pr
         s1 = 0.0
         s2 = 0.0
         for c in range(3):
-            ri = d[e, c] - (R[i, c, 0] * x0 + R[i, c, 1] * x1 + R[i, c, 2] * x2)
-            rj = d[e, c] - (R[j, c, 0] * x0 + R[j, c, 1] * x1 + R[j, c, 2] * x2)
+            dc = X[i, c] - X[j, c]
+            ri = dc - (R[i, c, 0] * x0 + R[i, c, 1] * x1 + R[i, c, 2] * x2)
+            rj = dc - (R[j, c, 0] * x0 + R[j, c, 1] * x1 + R[j, c, 2] * x2)
             energy_edges += ri * ri + rj * rj
             if c == 0:
                 s0 = ri + rj
@@ -323,21 +346,21 @@ def shape_residuals(LX, d, Lp, Li, Lx, delta, E, rest_edges, mu, w, R, G):  # pr
 
 
 @nb.njit(cache=True)
-def stretch_local(d, E, k, rest_length, rest, R, G):  # pragma: no cover - compiled
+def stretch_local(X, E, k, rest_length, rest, R, G):  # pragma: no cover - compiled
     """Edge-length term ``Σ k (|d| − L0)²``: return the energy, add the half-gradient.
 
-    A collapsed edge (``|d| ≤ 1e-12 L0``) is pulled to its rest vector,
-    rotated by its first endpoint's rotation when ``R`` (n, 3, 3) is given
-    (an empty ``R`` leaves it unrotated).
+    ``d_e = X[E[e, 0]] − X[E[e, 1]]``. A collapsed edge (``|d| ≤ 1e-12 L0``)
+    is pulled to its rest vector, rotated by its first endpoint's rotation
+    when ``R`` (n, 3, 3) is given (an empty ``R`` leaves it unrotated).
     """
     rotated = R.shape[0] > 0
     energy = 0.0
     for e in range(E.shape[0]):
         i = E[e, 0]
         j = E[e, 1]
-        d0 = d[e, 0]
-        d1 = d[e, 1]
-        d2 = d[e, 2]
+        d0 = X[i, 0] - X[j, 0]
+        d1 = X[i, 1] - X[j, 1]
+        d2 = X[i, 2] - X[j, 2]
         length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         if length > 1e-12 * max(rest_length[e], 1e-300):
             gap = length - rest_length[e]
@@ -365,6 +388,40 @@ def stretch_local(d, E, k, rest_length, rest, R, G):  # pragma: no cover - compi
     return energy
 
 
+@nb.njit(cache=True, inline="always")
+def _wedge_target(d0, d1, d2, n0, n1, n2, o0, o1, o2, tolerance):  # pragma: no cover
+    """Closest point of ``d`` in the half-plane continuing the host, widened to a wedge.
+
+    The half-plane is ``{x : x·n = 0, x·o ≥ 0}`` (unit normal ``n``, outward
+    direction ``o``); a ``tolerance`` > 0 (radians) widens it to the wedge
+    of that half-angle about it. Returns the three coordinates.
+    """
+    z = d0 * n0 + d1 * n1 + d2 * n2
+    p0 = d0 - z * n0
+    p1 = d1 - z * n1
+    p2 = d2 - z * n2
+    po = p0 * o0 + p1 * o1 + p2 * o2
+    if po < 0.0:
+        p0 -= po * o0
+        p1 -= po * o1
+        p2 -= po * o2
+    if tolerance == 0.0:
+        return p0, p1, p2
+    ca = math.cos(tolerance)
+    sa = math.sin(tolerance)
+    plen = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+    if abs(z) <= math.tan(tolerance) * plen:
+        return p0 + z * n0, p1 + z * n1, p2 + z * n2
+    sc = max(plen * ca + abs(z) * sa, 0.0)
+    inv = 1.0 / plen if plen > 0.0 else 1.0
+    sz = sa if z > 0.0 else (-sa if z < 0.0 else 0.0)
+    return (
+        sc * (ca * p0 * inv + sz * n0),
+        sc * (ca * p1 * inv + sz * n1),
+        sc * (ca * p2 * inv + sz * n2),
+    )
+
+
 @nb.njit(cache=True)
 def smooth_local(
     X, pairs, normal, outward, weights, tolerance, fixed_target, G
@@ -378,9 +435,6 @@ def smooth_local(
     to a wedge of half-angle ``tolerance`` radians when it is positive.
     """
     fixed = fixed_target.shape[0] > 0
-    ca = math.cos(tolerance)
-    sa = math.sin(tolerance)
-    ta = math.tan(tolerance)
     energy = 0.0
     for p in range(pairs.shape[0]):
         s = pairs[p, 0]
@@ -393,38 +447,10 @@ def smooth_local(
             t1 = fixed_target[p, 1]
             t2 = fixed_target[p, 2]
         else:
-            n0 = normal[p, 0]
-            n1 = normal[p, 1]
-            n2 = normal[p, 2]
-            z = d0 * n0 + d1 * n1 + d2 * n2
-            p0 = d0 - z * n0
-            p1 = d1 - z * n1
-            p2 = d2 - z * n2
-            o0 = outward[p, 0]
-            o1 = outward[p, 1]
-            o2 = outward[p, 2]
-            po = p0 * o0 + p1 * o1 + p2 * o2
-            if po < 0.0:
-                p0 -= po * o0
-                p1 -= po * o1
-                p2 -= po * o2
-            if tolerance == 0.0:
-                t0 = p0
-                t1 = p1
-                t2 = p2
-            else:
-                plen = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
-                if abs(z) <= ta * plen:
-                    t0 = p0 + z * n0
-                    t1 = p1 + z * n1
-                    t2 = p2 + z * n2
-                else:
-                    sc = max(plen * ca + abs(z) * sa, 0.0)
-                    inv = 1.0 / plen if plen > 0.0 else 1.0
-                    sz = sa if z > 0.0 else (-sa if z < 0.0 else 0.0)
-                    t0 = sc * (ca * p0 * inv + sz * n0)
-                    t1 = sc * (ca * p1 * inv + sz * n1)
-                    t2 = sc * (ca * p2 * inv + sz * n2)
+            t0, t1, t2 = _wedge_target(
+                d0, d1, d2, normal[p, 0], normal[p, 1], normal[p, 2],
+                outward[p, 0], outward[p, 1], outward[p, 2], tolerance,
+            )  # fmt: skip
         r0 = d0 - t0
         r1 = d1 - t1
         r2 = d2 - t2
@@ -435,34 +461,202 @@ def smooth_local(
 
 
 @nb.njit(cache=True)
+def band_local(X, Kp, Ki, Kx, normal, outward, weights, tolerance, G):  # pragma: no cover
+    """Band smooth-join term: return the energy, add the half-gradient ``Kᵀ W r``.
+
+    Row ``p`` of the sparse fit ``K`` (CSR arrays ``Kp``, ``Ki``, ``Kx``) gives
+    the guest's direction off seam vertex ``p``, ``d = (K X)_p``; its target
+    is the closest point in the half-plane (normal ``normal[p]``, outward
+    ``outward[p]``) widened to a wedge of half-angle ``tolerance[p]``; its
+    residual ``r = d − target`` weighs ``weights[p]``.
+    """
+    energy = 0.0
+    for p in range(Kp.shape[0] - 1):
+        d0 = 0.0
+        d1 = 0.0
+        d2 = 0.0
+        for k in range(Kp[p], Kp[p + 1]):
+            j = Ki[k]
+            a = Kx[k]
+            d0 += a * X[j, 0]
+            d1 += a * X[j, 1]
+            d2 += a * X[j, 2]
+        t0, t1, t2 = _wedge_target(
+            d0, d1, d2, normal[p, 0], normal[p, 1], normal[p, 2],
+            outward[p, 0], outward[p, 1], outward[p, 2], tolerance[p],
+        )  # fmt: skip
+        wp = weights[p]
+        r0 = d0 - t0
+        r1 = d1 - t1
+        r2 = d2 - t2
+        energy += wp * (r0 * r0 + r1 * r1 + r2 * r2)
+        r0 *= wp
+        r1 *= wp
+        r2 *= wp
+        for k in range(Kp[p], Kp[p + 1]):
+            j = Ki[k]
+            a = Kx[k]
+            G[j, 0] += a * r0
+            G[j, 1] += a * r1
+            G[j, 2] += a * r2
+    return energy
+
+
+@nb.njit(cache=True, inline="always")
+def _dot4(a, b, N):  # pragma: no cover - compiled
+    """``Σ a[i] b[i]`` over the first ``N`` entries of two 1-D arrays.
+
+    Four partial sums, so that the loop is not bound by the latency of one
+    chain of additions; the result differs from a sequential sum by rounding.
+    """
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    stop = N - N % 4
+    for i in range(0, stop, 4):
+        s0 += a[i] * b[i]
+        s1 += a[i + 1] * b[i + 1]
+        s2 += a[i + 2] * b[i + 2]
+        s3 += a[i + 3] * b[i + 3]
+    for i in range(stop, N):
+        s0 += a[i] * b[i]
+    return (s0 + s1) + (s2 + s3)
+
+
+@nb.njit(cache=True)
+def dot(a, b):  # pragma: no cover - compiled
+    """``Σ a b`` of two C-contiguous arrays of one shape.
+
+    Single-threaded on purpose: a BLAS ``ddot`` of more than about 10⁴
+    entries wakes a pool of threads, which on a machine whose cores are
+    busy costs milliseconds per call instead of microseconds.
+    """
+    x = a.ravel()
+    y = b.ravel()
+    return _dot4(x, y, x.shape[0])
+
+
+@nb.njit(cache=True)
+def lbfgs_pair(S, Y, slot, x_new, x, g_new, g):  # pragma: no cover - compiled
+    """Write ``s = x_new − x`` and ``y = g_new − g`` into row ``slot`` of ``S``, ``Y``.
+
+    ``S``, ``Y`` have shape (m, N); the four iterates are C-contiguous arrays
+    of N entries. Returns ``(sᵀy, yᵀy)``.
+    """
+    a = x_new.ravel()
+    b = x.ravel()
+    c = g_new.ravel()
+    e = g.ravel()
+    sy = 0.0
+    yy = 0.0
+    for i in range(a.shape[0]):
+        si = a[i] - b[i]
+        yi = c[i] - e[i]
+        S[slot, i] = si
+        Y[slot, i] = yi
+        sy += si * yi
+        yy += yi * yi
+    return sy, yy
+
+
+@nb.njit(cache=True)
 def lbfgs_first_loop(q, S, Y, rho, order, alpha):  # pragma: no cover - compiled
     """First half of the L-BFGS two-loop recursion, newest pair first.
 
     ``q`` (N,) is updated in place to ``q − Σ α_k y_k``; ``S``, ``Y`` (m, N)
     hold the pairs in the slots ``order`` (oldest first), ``rho`` (m,) their
-    ``1 / sᵀy``; ``alpha`` (m,) receives the coefficients by slot.
+    ``1 / sᵀy``; ``alpha`` (m,) receives the coefficients by slot. Each
+    update of ``q`` and the next pair's product with it share one pass.
     """
     N = q.shape[0]
-    for k in range(order.shape[0] - 1, -1, -1):
-        slot = order[k]
-        a = 0.0
-        for i in range(N):
-            a += S[slot, i] * q[i]
-        a *= rho[slot]
+    k = order.shape[0] - 1
+    if k < 0:
+        return
+    slot = order[k]
+    a = rho[slot] * _dot4(S[slot], q, N)
+    while k >= 0:
         alpha[slot] = a
-        for i in range(N):
-            q[i] -= a * Y[slot, i]
+        Yk = Y[slot]
+        if k == 0:
+            for i in range(N):
+                q[i] -= a * Yk[i]
+            break
+        nxt = order[k - 1]
+        Sn = S[nxt]
+        s0 = 0.0
+        s1 = 0.0
+        stop = N - N % 2
+        for i in range(0, stop, 2):
+            q0 = q[i] - a * Yk[i]
+            q1 = q[i + 1] - a * Yk[i + 1]
+            q[i] = q0
+            q[i + 1] = q1
+            s0 += Sn[i] * q0
+            s1 += Sn[i + 1] * q1
+        for i in range(stop, N):
+            q[i] -= a * Yk[i]
+            s0 += Sn[i] * q[i]
+        k -= 1
+        slot = nxt
+        a = rho[slot] * (s0 + s1)
 
 
 @nb.njit(cache=True)
 def lbfgs_second_loop(z, S, Y, rho, order, alpha):  # pragma: no cover - compiled
-    """Second half of the two-loop recursion, oldest pair first (``z`` (N,) in place)."""
+    """Second half of the two-loop recursion, oldest pair first (``z`` (N,) in place).
+
+    Each update of ``z`` and the next pair's product with it share one pass.
+    """
     N = z.shape[0]
-    for k in range(order.shape[0]):
-        slot = order[k]
-        b = 0.0
-        for i in range(N):
-            b += Y[slot, i] * z[i]
+    m = order.shape[0]
+    if m == 0:
+        return
+    slot = order[0]
+    b = _dot4(Y[slot], z, N)
+    for k in range(m):
         c = alpha[slot] - rho[slot] * b
-        for i in range(N):
-            z[i] += c * S[slot, i]
+        Sk = S[slot]
+        if k == m - 1:
+            for i in range(N):
+                z[i] += c * Sk[i]
+            break
+        nxt = order[k + 1]
+        Yn = Y[nxt]
+        s0 = 0.0
+        s1 = 0.0
+        stop = N - N % 2
+        for i in range(0, stop, 2):
+            z0 = z[i] + c * Sk[i]
+            z1 = z[i + 1] + c * Sk[i + 1]
+            z[i] = z0
+            z[i + 1] = z1
+            s0 += Yn[i] * z0
+            s1 += Yn[i + 1] * z1
+        for i in range(stop, N):
+            z[i] += c * Sk[i]
+            s0 += Yn[i] * z[i]
+        slot = nxt
+        b = s0 + s1
+
+
+@nb.njit(cache=True)
+def place_rows(X, rows, values):  # pragma: no cover - compiled
+    """``X[rows] = values`` for ``X`` (n, 3) and ``values`` (len(rows), 3)."""
+    for k in range(rows.shape[0]):
+        r = rows[k]
+        X[r, 0] = values[k, 0]
+        X[r, 1] = values[k, 1]
+        X[r, 2] = values[k, 2]
+
+
+@nb.njit(cache=True)
+def take_rows(G, rows):  # pragma: no cover - compiled
+    """``G[rows]``, shape (len(rows), 3), for ``G`` (n, 3)."""
+    out = np.empty((rows.shape[0], 3))
+    for k in range(rows.shape[0]):
+        r = rows[k]
+        out[k, 0] = G[r, 0]
+        out[k, 1] = G[r, 1]
+        out[k, 2] = G[r, 2]
+    return out

@@ -165,9 +165,7 @@ class LocalGlobalSolver:
         e = 0.0
         rhs = np.zeros((self.n, 3))
         for term in self.terms:
-            et, gt = term.local(state)
-            e += et
-            rhs += gt
+            e += term.local_into(state, rhs)
         if not np.isfinite(e):
             raise SolveError(
                 "the solve produced non-finite positions; the guest has degenerate or "
@@ -291,17 +289,20 @@ class LocalGlobalSolver:
         clock = {"local": 0.0, "solve": 0.0}
         stats = {"local_steps": 0, "back_solves": 0, "rejected": 0, "restarts": 0}
         free, fixed = self.free, self.fixed
-        bc = np.asarray(bc, dtype=np.float64)
+        # (b, 3) rows for the compiled scatter (broadcast as ``X[fixed] = bc`` would)
+        bc = np.ascontiguousarray(
+            np.broadcast_to(np.asarray(bc, dtype=np.float64), (len(fixed), 3))
+        )
 
         def local(x, hint):
             t0 = time.perf_counter()
             X = np.empty((self.n, 3))
-            X[free] = x
-            X[fixed] = bc
+            kernels.place_rows(X, free, x)
+            kernels.place_rows(X, fixed, bc)
             state, e, G = self.local(X, hint)
             clock["local"] += time.perf_counter() - t0
             stats["local_steps"] += 1
-            return state, e, G[free]
+            return state, e, kernels.take_rows(G, free)
 
         def back_solve(v, plain=False):
             # the quasi-Newton steps use the preconditioner P; the plain global step is Q's
@@ -340,16 +341,16 @@ class LocalGlobalSolver:
                 clock["model"] = clock.get("model", 0.0) + time.perf_counter() - t0
             if acceleration > 0 and memory.size:
                 d = -memory.apply(g, back_solve)
-                gd = float(np.vdot(g, d))
+                gd = kernels.dot(g, d)
                 if not gd < 0.0:
                     memory.clear()
                     stats["restarts"] += 1
                     d = -back_solve(g)
-                    gd = float(np.vdot(g, d))
+                    gd = kernels.dot(g, d)
             else:
                 # the plain global step
                 d = -back_solve(g)
-                gd = float(np.vdot(g, d))
+                gd = kernels.dot(g, d)
             t = 1.0
             for _ in range(_MAX_BACKTRACKS + 1):
                 x_new = x + t * d
@@ -372,7 +373,7 @@ class LocalGlobalSolver:
                 x_new = x + d
                 state_new, e_new, g_new = local(x_new, hint)
             if acceleration > 0:
-                memory.push(x_new - x, g_new - g)
+                memory.push(x_new, x, g_new, g)
             move = t * float(np.abs(d).max())
             x, e, g, state = x_new, e_new, g_new, state_new
             energy.append(e)
@@ -408,16 +409,24 @@ class _Memory:
         Pairs kept (0: none).
     shape : tuple
         Shape of one iterate, e.g. ``(n_free, 3)``.
+
+    Notes
+    -----
+    The buffers hold ``m + 1`` rows: a new pair is written into a free row
+    and only then accepted or refused, so a refused pair never overwrites
+    the oldest one kept.
     """
 
     def __init__(self, m: int, shape: tuple):
         N = int(np.prod(shape))
+        rows = m + 1 if m > 0 else 0
         self.m = m
-        self.S = np.empty((m, N))
-        self.Y = np.empty((m, N))
-        self.rho = np.empty(m)
-        self.alpha = np.empty(m)
+        self.S = np.empty((rows, N))
+        self.Y = np.empty((rows, N))
+        self.rho = np.empty(rows)
+        self.alpha = np.empty(rows)
         self.order: list[int] = []  # slots, oldest first
+        self.unused = list(range(rows))
 
     @property
     def size(self) -> int:
@@ -427,20 +436,20 @@ class _Memory:
     def clear(self) -> None:
         """Forget every pair."""
         self.order.clear()
+        self.unused = list(range(len(self.rho)))
 
-    def push(self, s: np.ndarray, y: np.ndarray) -> None:
-        """Keep the pair if its curvature ``sᵀy`` is positive (else BFGS would break)."""
-        sy = float(np.vdot(s, y))
-        if not (sy > 1e-12 * float(np.vdot(y, y)) and sy > 0.0):
+    def push(self, x_new: np.ndarray, x: np.ndarray, g_new: np.ndarray, g: np.ndarray) -> None:
+        """Keep the pair ``s = x_new − x``, ``y = g_new − g`` if its curvature ``sᵀy`` is
+        positive (else BFGS would break); all four are C-contiguous, shaped like an iterate."""
+        slot = self.unused[-1]
+        sy, yy = kernels.lbfgs_pair(self.S, self.Y, slot, x_new, x, g_new, g)
+        if not (sy > 1e-12 * yy and sy > 0.0):
             return
-        if len(self.order) < self.m:
-            slot = len(self.order)
-        else:
-            slot = self.order.pop(0)
-        self.S[slot] = s.reshape(-1)
-        self.Y[slot] = y.reshape(-1)
+        self.unused.pop()
         self.rho[slot] = 1.0 / sy
         self.order.append(slot)
+        if len(self.order) > self.m:
+            self.unused.append(self.order.pop(0))
 
     def apply(self, g: np.ndarray, back_solve) -> np.ndarray:
         """The inverse-Hessian model applied to ``g`` (L-BFGS two-loop recursion).

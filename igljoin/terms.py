@@ -145,6 +145,16 @@ class Term(ABC):
             KtW = self._KtW = sp.csr_matrix(self.K.T @ sp.diags(self.weights))
         return e, KtW @ r
 
+    def local_into(self, state: LocalState, G: np.ndarray) -> float:
+        """:meth:`local` adding its half gradient into ``G`` (n, 3); returns the energy.
+
+        The solver sums the terms' half gradients this way; a compiled term
+        adds into ``G`` directly instead of making an array of its own.
+        """
+        e, g = self.local(state)
+        G += g
+        return e
+
 
 def check_order(terms: list[Term]) -> None:
     """Refuse a term list in which a term reads rotations a later term sets.
@@ -321,6 +331,7 @@ class ShapeTerm(Term):
             self._Li = self.L.indices.astype(np.int64)
             self._Lx = np.ascontiguousarray(self.L.data, dtype=np.float64)
             self._inc_ptr, self._inc_edges = kernels.incidence(self.E, n)
+            self._E_c = np.ascontiguousarray(self.E)
             self._delta_c = np.ascontiguousarray(self.delta, dtype=np.float64)
             self._rest_c = np.ascontiguousarray(self.rest_edges, dtype=np.float64)
 
@@ -439,7 +450,8 @@ class ShapeTerm(Term):
             r = LX - self.delta
             return w * float(np.einsum("ij,ij->", r, r)), w * (self.Lt @ r)
         if self.compiled and state.rotations is None:
-            return self._local_compiled(state)
+            G = np.zeros((self.n, 3))
+            return self._local_compiled(state, G), G
         LX, _ = self._fit(state)
         Rd, a0, a1 = self._rotated(state)
         dT = _edge_vectors(state, self.E, self.D, self.compiled).T
@@ -456,36 +468,43 @@ class ShapeTerm(Term):
         grad *= w
         return w * float(e), grad
 
-    def _local_compiled(self, state: LocalState) -> tuple[float, np.ndarray]:
-        """:meth:`local` by the compiled kernels; sets ``state.rotations``.
+    def local_into(self, state: LocalState, G: np.ndarray) -> float:
+        """:meth:`local` adding into ``G`` (see :meth:`Term.local_into`)."""
+        if self.rotation_aware and self.compiled and state.rotations is None:
+            return self._local_compiled(state, G)
+        return super().local_into(state, G)
+
+    def _local_compiled(self, state: LocalState, G: np.ndarray) -> float:
+        """:meth:`local` by the compiled kernels, adding into ``G`` (n, 3).
+
+        Sets ``state.rotations``.
 
         Vertices where the warm-started Newton fit does not settle get their
         rotation from libigl's SVD fit, as in :func:`igljoin.rotations.fit_rotations`.
         """
         n = self.n
-        d = _edge_vectors(state, self.E, self.D)
         hint = state.hint
         if hint is None or hint.shape != (n, 3, 3):
             hint = _NO_ROTATIONS
         LX = np.empty((n, 3))
         A = np.empty((n, 3, 3))
         R = np.empty((n, 3, 3))
-        failed_mask = kernels.shape_rotations(
-            state.X, d, self._Lp, self._Li, self._Lx, self._delta_c, self._rest_c,
-            self._inc_ptr, self._inc_edges, ROTATION_REGULARISATION,
-            np.ascontiguousarray(hint, dtype=np.float64), LX, A, R,
+        mu = ROTATION_REGULARISATION
+        e, failed_mask = kernels.shape_local(
+            state.X, self._E_c, self._Lp, self._Li, self._Lx, self._delta_c, self._rest_c,
+            self._inc_ptr, self._inc_edges, mu, self.weight,
+            np.ascontiguousarray(hint, dtype=np.float64), LX, A, R, G,
         )  # fmt: skip
         failed = np.flatnonzero(failed_mask)
         if failed.size:
             R[failed] = fit_rotations_igl(A[failed].transpose(1, 2, 0)).transpose(2, 0, 1)
-        G = np.zeros((n, 3))
-        e = kernels.shape_residuals(
-            LX, d, self._Lp, self._Li, self._Lx, self._delta_c, self.E, self._rest_c,
-            ROTATION_REGULARISATION, self.weight, R, G,
-        )  # fmt: skip
+            e = kernels.shape_residuals(
+                state.X, self._E_c, self._Lp, self._Li, self._Lx, LX, self._delta_c,
+                self._rest_c, mu, self.weight, R, G,
+            )  # fmt: skip
         state.rotations = R
         state.cache["LX"] = LX
-        return float(e), G
+        return float(e)
 
 
 #: Stand-in for "no rotations" in the compiled kernels, shape (0, 3, 3).
@@ -532,6 +551,14 @@ class StretchTerm(Term):
         """Edge vectors ``D X``, shape (e, 3), shared with the shape term."""
         return _edge_vectors(state, self.E, self.K, self.compiled)
 
+    def local_into(self, state: LocalState, G: np.ndarray) -> float:
+        """:meth:`local` adding into ``G`` (see :meth:`Term.local_into`)."""
+        if not self.compiled:
+            return super().local_into(state, G)
+        R = _NO_ROTATIONS if state.rotations is None else state.rotations
+        e = kernels.stretch_local(state.X, self.E, self.weights, self.rest_length, self.rest, R, G)
+        return float(e)
+
     def quadratic(self) -> sp.csr_matrix:
         """``Dᵀ diag(k) D``, shape (n, n)."""
         return sp.csr_matrix(self.Kt @ sp.diags(self.weights) @ self.K)
@@ -553,12 +580,10 @@ class StretchTerm(Term):
 
     def local(self, state: LocalState) -> tuple[float, np.ndarray]:
         """Energy and half gradient ``Dᵀ diag(k) (D X − s)`` (see :meth:`Term.local`)."""
-        d = self.applied(state)
         if self.compiled:
             G = np.zeros((state.X.shape[0], 3))
-            R = _NO_ROTATIONS if state.rotations is None else state.rotations
-            e = kernels.stretch_local(d, self.E, self.weights, self.rest_length, self.rest, R, G)
-            return float(e), G
+            return self.local_into(state, G), G
+        d = self.applied(state)
         length = np.sqrt(np.einsum("ij,ij->i", d, d))
         if not (length > 1e-12 * np.maximum(self.rest_length, 1e-300)).all():
             r = d - self.target(state)
@@ -611,9 +636,7 @@ class SmoothJoinTerm(Term):
         Band mode: seam vertices the term acts on (default all); the others
         keep a row of weight 0.
     compiled : bool
-        Robust and paper modes: compiled local step (default) or the numpy
-        reference path. Band mode has only the numpy path (its rows are a
-        sparse fit, one product per step).
+        Compiled local step (default) or the numpy reference path.
     """
 
     name = "smooth"
@@ -638,6 +661,7 @@ class SmoothJoinTerm(Term):
             self._init_band(n, frames, weight, fit)
             if active is not None:
                 self.weights = np.where(np.asarray(active, dtype=bool), self.weights, 0.0)
+            self.compiled = bool(compiled)
             return
         self.tolerance = float(tolerance)
         on_seam = np.zeros(n, dtype=bool)
@@ -688,18 +712,34 @@ class SmoothJoinTerm(Term):
         self.outward = np.ascontiguousarray(-frames.inward, dtype=np.float64)
         self.weights = np.full(self.K.shape[0], float(weight) * ROWS_PER_BAND_ROW)
         self.preconditioner_scale = 0.5
-        self.compiled = False
+        # arrays of the compiled local step (igljoin.kernels.band_local)
+        self._Kp = self.K.indptr.astype(np.int64)
+        self._Ki = self.K.indices.astype(np.int64)
+        self._Kx = np.ascontiguousarray(self.K.data, dtype=np.float64)
+        self._tol_c = np.ascontiguousarray(self.tolerance, dtype=np.float64)
 
     def local(self, state: LocalState) -> tuple[float, np.ndarray]:
         """Energy and half gradient (see :meth:`Term.local`), compiled when available."""
         if not self.compiled:
             return super().local(state)
         G = np.zeros((state.X.shape[0], 3))
-        e = kernels.smooth_local(
-            state.X, self.pairs, self.normal, self.outward, self.weights, self.tolerance,
-            self._fixed_c, G,
-        )  # fmt: skip
-        return float(e), G
+        return self.local_into(state, G), G
+
+    def local_into(self, state: LocalState, G: np.ndarray) -> float:
+        """:meth:`local` adding into ``G`` (see :meth:`Term.local_into`)."""
+        if not self.compiled:
+            return super().local_into(state, G)
+        if self.mode == "band":
+            e = kernels.band_local(
+                state.X, self._Kp, self._Ki, self._Kx, self.normal, self.outward,
+                np.ascontiguousarray(self.weights, dtype=np.float64), self._tol_c, G,
+            )  # fmt: skip
+        else:
+            e = kernels.smooth_local(
+                state.X, self.pairs, self.normal, self.outward, self.weights, self.tolerance,
+                self._fixed_c, G,
+            )  # fmt: skip
+        return float(e)
 
     @staticmethod
     def _tangential_points(V0, F, seam, on_seam, Ec):

@@ -129,6 +129,19 @@ def test_smooth_kernel_equals_numpy(tube, options):
     assert np.abs(gk - gn).max() <= _G_REL * np.abs(gn).max()
 
 
+@pytest.mark.parametrize("keep", [None, 5.0], ids=["half-plane", "wedge"])
+def test_band_kernel_equals_numpy(tube, keep):
+    solver = _solver(tube, smooth_mode="band", smooth_keep_deg=keep)
+    bands = [t for t in solver.terms if isinstance(t, SmoothJoinTerm)]
+    assert bands and all(t.mode == "band" and t.compiled for t in bands)
+    # large perturbation: some rows fold back into the host, some leave the wedge
+    X = _perturbed(solver, 1.0, 7)
+    for band in bands:
+        (ek, gk, _), (en, gn, _) = _both(band, X)
+        assert ek == pytest.approx(en, rel=_E_REL)
+        assert np.abs(gk - gn).max() <= _G_REL * np.abs(gn).max()
+
+
 def test_numpy_path_gives_the_same_join(tube):
     """Terms switched to their numpy reference path (``compiled=False``) give the same join."""
     reference = _solver(tube)

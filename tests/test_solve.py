@@ -413,3 +413,59 @@ def test_resolves_reuse_the_factorization(patch):
     np.testing.assert_allclose(runs[0].guest.V[runs[0].seam], targets, atol=1e-9 * _size(patch))
     solver.solve(stretch_weight=2.0)
     assert linsolve.FixedQuadratic.made > made and solver.factorizations == 2
+
+
+# -- the quasi-Newton memory ---------------------------------------------------------------
+
+
+def _two_loop(g, pairs, scale):
+    """The L-BFGS two-loop recursion by its definition (initial inverse Hessian ``scale``)."""
+    q = g.reshape(-1).copy()
+    alphas = []
+    for s, y in reversed(pairs):
+        a = float(np.dot(s, q)) / float(np.dot(s, y))
+        alphas.append(a)
+        q -= a * y
+    z = scale * q
+    for (s, y), a in zip(pairs, reversed(alphas)):
+        b = float(np.dot(y, z)) / float(np.dot(s, y))
+        z += (a - b) * s
+    return z.reshape(g.shape)
+
+
+def test_quasi_newton_memory_keeps_the_last_pairs_of_positive_curvature():
+    from igljoin.solve import _Memory
+
+    rng = np.random.default_rng(0)
+    shape = (1001, 3)  # an odd size: the kernels' unrolled loops have a remainder
+    memory = _Memory(3, shape)
+    kept = []
+    for k in range(6):
+        x, g = rng.normal(size=shape), rng.normal(size=shape)
+        s = rng.normal(size=shape)
+        # every third pair has negative curvature and must be refused
+        y = (-1.0 if k % 3 == 2 else 1.0) * s + 0.1 * rng.normal(size=shape)
+        memory.push(x + s, x, g + y, g)
+        if k % 3 != 2:
+            kept.append((s.reshape(-1), y.reshape(-1)))
+    kept = kept[-3:]
+    assert memory.size == 3
+    g = rng.normal(size=shape)
+    z = memory.apply(g, lambda v: 0.5 * v)
+    ref = _two_loop(g, kept, 0.5)
+    # the same sums in another order over 3003 entries: rounding only
+    assert np.abs(z - ref).max() <= 1e-12 * np.abs(ref).max()
+    memory.clear()
+    assert memory.size == 0
+    assert np.array_equal(memory.apply(g, lambda v: 0.5 * v), 0.5 * g)
+
+
+def test_dot_kernel_is_the_dot_product():
+    from igljoin import kernels
+
+    rng = np.random.default_rng(1)
+    for n in (0, 1, 7, 30001):
+        a, b = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+        ref = float(np.dot(a.reshape(-1), b.reshape(-1)))
+        # partial sums in another order: rounding of a sum of 3n products of size ~1
+        assert kernels.dot(a, b) == pytest.approx(ref, rel=1e-12, abs=1e-12 * np.sqrt(3 * n + 1))
