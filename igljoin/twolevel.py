@@ -144,6 +144,38 @@ def rigid_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
     return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * m, 6 * a))
 
 
+def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
+    """Three bending motions of every cluster, shape (3 m, 3 a): ``n u²``, ``n u v``, ``n v²``.
+
+    ``n`` is the cluster's normal (the direction of least spread of its
+    vertices), ``u``, ``v`` the coordinates along its two other principal
+    directions divided by the cluster's radius.
+    """
+    m = len(X)
+    a = int(labels.max()) + 1
+    count = np.bincount(labels, minlength=a).astype(np.float64)
+    centre = np.stack([np.bincount(labels, X[:, d], minlength=a) for d in range(3)], 1)
+    r = X - (centre / count[:, None])[labels]
+    cov = np.zeros((a, 3, 3))
+    np.add.at(cov, labels, r[:, :, None] * r[:, None, :])
+    _, vec = np.linalg.eigh(cov)  # ascending: vec[:, :, 0] the normal
+    radius = np.sqrt(np.bincount(labels, np.einsum("ij,ij->i", r, r), minlength=a) / count)
+    r = r / np.maximum(radius[labels], 1e-300)[:, None]
+    frame = vec[labels]
+    u = np.einsum("ij,ij->i", r, frame[:, :, 2])
+    v = np.einsum("ij,ij->i", r, frame[:, :, 1])
+    normal = frame[:, :, 0]
+    shapes = np.stack([u * u, u * v, v * v], 1)
+    shapes -= (np.stack([np.bincount(labels, shapes[:, k], minlength=a) for k in range(3)], 1)
+               / count[:, None])[labels]
+    blocks = normal[:, :, None] * shapes[:, None, :]  # (m, 3, 3): coordinate, shape
+    rows = np.broadcast_to(
+        3 * np.arange(m)[:, None, None] + np.arange(3)[None, :, None], blocks.shape
+    )
+    cols = np.broadcast_to(3 * labels[:, None, None] + np.arange(3)[None, None, :], blocks.shape)
+    return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * m, 3 * a))
+
+
 class TwoLevelModel:
     """``P⁻¹`` with a coarse Gauss–Newton correction, as the quasi-Newton initial inverse Hessian.
 
@@ -176,29 +208,68 @@ class TwoLevelModel:
         (``Aᵀ H A``) and ``factor`` times.
     """
 
-    def __init__(self, solver, cluster_size: int = 20, balancing: bool = False):
+    def __init__(
+        self,
+        solver,
+        cluster_size: int = 20,
+        balancing: bool = False,
+        rebuild_angle: float | None = None,
+        every: int | None = None,
+        keep_memory: bool = False,
+        smooth: int = 0,
+        bending: bool = False,
+    ):
         self.solver = solver
         self.cluster_size = int(cluster_size)
         self.balancing = bool(balancing)
+        self.rebuild_angle = rebuild_angle
+        self.every = every
+        self.keep_memory = bool(keep_memory)
+        self.smooth = int(smooth)
+        self.bending = bool(bending)
         self.free_dofs = dofs(solver.free)
         self.labels = None
+        self.built_rotations = None
+        self.built_at = 0
         self.factorizations = 0
         self.seconds = {"clusters": 0.0, "model": 0.0, "coarse": 0.0, "factor": 0.0}
 
+    def _due(self, state, iteration: int) -> bool:
+        if self.labels is None:
+            return True
+        if self.every is not None and iteration - self.built_at >= self.every:
+            return True
+        if self.rebuild_angle is not None and state.rotations is not None:
+            R = state.rotations[self.solver.free]
+            R0 = self.built_rotations
+            # angle of R R0ᵀ from its trace
+            tr = np.einsum("nij,nij->n", R, R0)
+            angle = np.arccos(np.clip(0.5 * (tr - 1.0), -1.0, 1.0))
+            return float(angle.max()) > self.rebuild_angle
+        return False
+
     def refresh(self, state, iteration: int) -> bool:
-        """Build the coarse correction at ``state`` the first time; ``True`` then."""
-        if self.labels is not None:
+        """Build the coarse correction at ``state`` when due; ``True`` when the memory must go."""
+        if not self._due(state, iteration):
             return False
+        first = self.labels is None
         ls = self.solver
         t0 = time.perf_counter()
         X = state.X[ls.free]
-        self.labels = clusters(X, ls.P[ls.free][:, ls.free], self.cluster_size)
+        if first:
+            self.labels = clusters(X, ls.P[ls.free][:, ls.free], self.cluster_size)
         t1 = time.perf_counter()
         self.factors = gauss_newton_factors(ls.terms, state, ls.n)
         t2 = time.perf_counter()
-        A = rigid_prolongation(X, self.labels).tocoo()
+        A = rigid_prolongation(X, self.labels)
+        if self.bending:
+            A = sp.hstack([A, bending_prolongation(X, self.labels)], format="csr")
+        A = A.tocoo()
         # the same columns on all 3n coordinates (zero rows at the fixed vertices)
         full = sp.csr_matrix((A.data, (self.free_dofs[A.row], A.col)), shape=(3 * ls.n, A.shape[1]))
+        if self.smooth:
+            full = self._smoothed(full)
+            A = full[self.free_dofs].tocoo()
         Ac = sp.csr_matrix((A.shape[1], A.shape[1]))
         for J, w, sign in self.factors:
             JA = J @ full
@@ -212,7 +283,38 @@ class TwoLevelModel:
         t4 = time.perf_counter()
         for key, dt in zip(self.seconds, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
             self.seconds[key] += dt
-        return True
+        if state.rotations is not None:
+            self.built_rotations = state.rotations[ls.free].copy()
+        self.built_at = iteration
+        return first or not self.keep_memory
+
+    def _smoothed(self, full: sp.csr_matrix) -> sp.csr_matrix:
+        """``(I − ω D⁻¹ H)^k A`` on the free rows (``D``: the model's diagonal)."""
+        n3 = 3 * self.solver.n
+        diag = np.zeros(n3)
+        for J, w, sign in self.factors:
+            diag += sign * (J.multiply(J).T @ w)
+        free = np.zeros(n3, dtype=bool)
+        free[self.free_dofs] = True
+        inv = np.where(free, 1.0 / np.maximum(diag, 1e-300), 0.0)
+        # ω = 4 / (3 ρ(D⁻¹ H)): the damping of smoothed aggregation; ρ by power iteration
+        v = np.where(free, np.random.default_rng(0).standard_normal(n3), 0.0)
+        rho = 1.0
+        for _ in range(15):
+            hv = np.zeros(n3)
+            for J, w, sign in self.factors:
+                hv += sign * (J.T @ (w * (J @ v)))
+            hv *= inv
+            rho = float(np.linalg.norm(hv) / np.linalg.norm(v))
+            v = hv / np.linalg.norm(hv)
+        omega = 4.0 / (3.0 * rho)
+        Dinv = sp.diags(omega * inv)
+        for _ in range(self.smooth):
+            HA = sp.csr_matrix((n3, full.shape[1]))
+            for J, w, sign in self.factors:
+                HA = HA + sign * (J.T @ (sp.diags(w) @ (J @ full)))
+            full = sp.csr_matrix(full - Dinv @ HA)
+        return full
 
     def _coarse(self, v: np.ndarray) -> np.ndarray:
         """``A A_c⁻¹ Aᵀ v`` for ``v`` of shape (3 n_free,)."""
