@@ -49,6 +49,7 @@ _BASE = {"tube": ("end_to_end", 2436), "patch": ("partial_patch", 1180)}
 #: The two-level models compared with the default run.
 VARIANTS = {
     "rigid, built once": dict(bending=False, rebuild_angle=None),
+    "bending, built once": dict(rebuild_angle=None),
     "bending, rebuilt": dict(),
 }
 
