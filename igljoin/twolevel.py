@@ -12,12 +12,14 @@ This module keeps ``P`` on the fine mesh and resolves the model on a coarse
 space only: the free vertices are grouped into connected clusters of about
 ``cluster_size`` vertices (:func:`clusters`), each with its six rigid
 motions — three translations and three infinitesimal rotations about its
-centroid at the current positions (:func:`rigid_prolongation`, ``A`` of
-shape (3 m, 6 a)). The coarse matrix ``A_c = Aᵀ H A`` is the model ``H``
-projected onto them, computed from the model's factored form
+centroid at the current positions (:func:`rigid_prolongation`) — and three
+bending motions (:func:`bending_prolongation`; ``A`` of shape (3 m, 9 a)).
+The coarse matrix ``A_c = Aᵀ H A`` is the model ``H`` projected onto them,
+computed from the model's factored form
 (:func:`igljoin.newton.gauss_newton_factors`) without assembling ``H``, and
-factored once (6 a unknowns, a few thousand). The initial inverse Hessian
-of the quasi-Newton steps becomes
+factored (9 a unknowns, a few thousand); both are rebuilt at the current
+iterate when the guest has turned far from where they were built. The
+initial inverse Hessian of the quasi-Newton steps becomes
 
 * additive: ``P⁻¹ + A A_c⁻¹ Aᵀ``, or
 * balancing (``balancing=True``): ``C + (I − C H) P⁻¹ (I − H C)`` with
@@ -39,7 +41,7 @@ from scipy.sparse import csgraph
 from .linsolve import FixedQuadratic
 from .newton import dofs, gauss_newton_factors
 
-__all__ = ["clusters", "rigid_prolongation", "TwoLevelModel"]
+__all__ = ["clusters", "rigid_prolongation", "bending_prolongation", "TwoLevelModel"]
 
 # relative ridge added to the coarse matrix: a cluster of three nearly collinear vertices
 # has a nearly free rotation about their line; 1e-10 of the mean diagonal keeps its
@@ -144,14 +146,77 @@ def rigid_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
     return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * m, 6 * a))
 
 
+def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
+    """Three bending motions of every cluster, shape (3 m, 3 a): ``n u²``, ``n u v``, ``n v²``.
+
+    ``n`` is the cluster's normal (the direction of least spread of its
+    vertices), ``u``, ``v`` the coordinates along its two other principal
+    directions divided by the cluster's radius; each quadratic has its
+    cluster mean removed (that part is a translation, already among the
+    rigid motions). With them a smooth bending of the surface — a tube's
+    cross-section turning oval — is matched across the clusters' borders to
+    third order instead of first: piecewise rigid motions represent it only
+    at many times its energy (33× for the slowest error of the paper-sized
+    tube), so the coarse correction barely moves it.
+
+    Parameters
+    ----------
+    X : ndarray, shape (m, 3)
+    labels : ndarray of int64, shape (m,)
+        Cluster of every vertex (:func:`clusters`).
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (3 m, 3 a)
+        Columns ``3 j .. 3 j + 2``: cluster ``j``'s ``n u²``, ``n u v``,
+        ``n v²``; vertex-major rows.
+    """
+    m = len(X)
+    a = int(labels.max()) + 1
+    count = np.bincount(labels, minlength=a).astype(np.float64)
+    centre = np.stack([np.bincount(labels, X[:, d], minlength=a) for d in range(3)], 1)
+    r = X - (centre / count[:, None])[labels]
+    cov = np.zeros((a, 3, 3))
+    np.add.at(cov, labels, r[:, :, None] * r[:, None, :])
+    _, vec = np.linalg.eigh(cov)  # ascending: vec[:, :, 0] the normal
+    radius = np.sqrt(np.bincount(labels, np.einsum("ij,ij->i", r, r), minlength=a) / count)
+    r = r / np.maximum(radius[labels], 1e-300)[:, None]
+    frame = vec[labels]
+    u = np.einsum("ij,ij->i", r, frame[:, :, 2])
+    v = np.einsum("ij,ij->i", r, frame[:, :, 1])
+    normal = frame[:, :, 0]
+    shapes = np.stack([u * u, u * v, v * v], 1)
+    shapes -= (
+        np.stack([np.bincount(labels, shapes[:, k], minlength=a) for k in range(3)], 1)
+        / count[:, None]
+    )[labels]
+    blocks = normal[:, :, None] * shapes[:, None, :]  # (m, 3, 3): coordinate, shape
+    rows = np.broadcast_to(
+        3 * np.arange(m)[:, None, None] + np.arange(3)[None, :, None], blocks.shape
+    )
+    cols = np.broadcast_to(3 * labels[:, None, None] + np.arange(3)[None, None, :], blocks.shape)
+    return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * m, 3 * a))
+
+
 class TwoLevelModel:
     """``P⁻¹`` with a coarse Gauss–Newton correction, as the quasi-Newton initial inverse Hessian.
 
     Passed as ``model`` to :meth:`igljoin.solve.LocalGlobalSolver.run`. At
-    the first iteration it groups the free vertices into clusters, builds
-    their rigid motions ``A`` at the current positions and factors
+    the first iteration it groups the free vertices into clusters; then, at
+    the first iteration and again whenever a free vertex's fitted rotation
+    has turned by more than ``rebuild_angle`` since the last build, it
+    builds the clusters' motions ``A`` at the current positions (six rigid
+    ones, and three bending ones with ``bending``) and factors
     ``A_c = Aᵀ H A`` (``H``: the Gauss–Newton model at the current
-    iterate); ``P``'s factorization is the solver's own, reused.
+    iterate). ``P``'s factorization is the solver's own, reused.
+
+    A coarse space built once points the wrong way once the guest has
+    turned far from where it was built (its turns are about the old
+    centroids and axes, its stiffnesses those of the old edge directions):
+    on a bending tube the steps it proposes are then too long and the line
+    search rejects most of them. Rebuilding keeps it aligned; the
+    quasi-Newton pairs are kept across a rebuild (a different initial
+    inverse Hessian under the same pairs is still a descent model).
 
     Parameters
     ----------
@@ -159,60 +224,100 @@ class TwoLevelModel:
         Supplies the terms, the fixed vertices, ``P``'s factorization and
         the backend.
     cluster_size : int
-        Free vertices per cluster aimed at (coarse unknowns: 6 per cluster).
+        Free vertices per cluster aimed at (coarse unknowns: 6 per cluster,
+        9 with ``bending``).
     balancing : bool
         The balancing form ``C + (I − C H) P⁻¹ (I − H C)`` instead of the
         additive ``P⁻¹ + C``: fewer iterations, two products with ``H`` more
         per step.
+    bending : bool
+        Add every cluster's three bending motions
+        (:func:`bending_prolongation`): the soft modes of a thin tube (its
+        cross-sections turning oval) are smooth bendings that piecewise
+        rigid motions approximate only at a high energy.
+    rebuild_angle : float or None
+        Radians a vertex's rotation may turn from its value at the last
+        build before the coarse space is rebuilt; ``None``: built once.
 
     Attributes
     ----------
     labels : ndarray of int64, shape (n_free,)
         Cluster of every free vertex (after the first refresh).
     factorizations : int
-        Coarse factorizations made.
+        Coarse factorizations made (builds).
     seconds : dict
         ``clusters``, ``model`` (the factored Gauss–Newton model), ``coarse``
-        (``Aᵀ H A``) and ``factor`` times.
+        (``Aᵀ H A``) and ``factor`` times, summed over the builds.
     """
 
-    def __init__(self, solver, cluster_size: int = 20, balancing: bool = False):
+    def __init__(
+        self,
+        solver,
+        cluster_size: int = 20,
+        balancing: bool = False,
+        bending: bool = True,
+        rebuild_angle: float | None = 0.2,
+    ):
         self.solver = solver
         self.cluster_size = int(cluster_size)
         self.balancing = bool(balancing)
+        self.bending = bool(bending)
+        self.rebuild_angle = None if rebuild_angle is None else float(rebuild_angle)
         self.free_dofs = dofs(solver.free)
         self.labels = None
+        self.built_rotations = None
         self.factorizations = 0
         self.seconds = {"clusters": 0.0, "model": 0.0, "coarse": 0.0, "factor": 0.0}
 
+    def turned(self, state) -> float:
+        """Largest angle (radians) a free vertex's rotation turned since the last build."""
+        if self.built_rotations is None or state.rotations is None:
+            return 0.0
+        R = state.rotations[self.solver.free]
+        # the angle of R R0ᵀ from its trace, 1 + 2 cos(angle)
+        trace = np.einsum("nij,nij->n", R, self.built_rotations)
+        return float(np.arccos(np.clip(0.5 * (trace.min() - 1.0), -1.0, 1.0)))
+
     def refresh(self, state, iteration: int) -> bool:
-        """Build the coarse correction at ``state`` the first time; ``True`` then."""
-        if self.labels is not None:
+        """Build the coarse correction at ``state`` when due.
+
+        Returns ``True`` at the first build only (the solver then drops its
+        quasi-Newton memory, of which there is none yet).
+        """
+        first = self.labels is None
+        if not first and (self.rebuild_angle is None or self.turned(state) <= self.rebuild_angle):
             return False
         ls = self.solver
         t0 = time.perf_counter()
         X = state.X[ls.free]
-        self.labels = clusters(X, ls.P[ls.free][:, ls.free], self.cluster_size)
+        if first:
+            self.labels = clusters(X, ls.P[ls.free][:, ls.free], self.cluster_size)
         t1 = time.perf_counter()
         self.factors = gauss_newton_factors(ls.terms, state, ls.n)
         t2 = time.perf_counter()
-        A = rigid_prolongation(X, self.labels).tocoo()
+        A = rigid_prolongation(X, self.labels)
+        if self.bending:
+            A = sp.hstack([A, bending_prolongation(X, self.labels)], format="csr")
+        A = A.tocoo()
         # the same columns on all 3n coordinates (zero rows at the fixed vertices)
         full = sp.csr_matrix((A.data, (self.free_dofs[A.row], A.col)), shape=(3 * ls.n, A.shape[1]))
-        Ac = sp.csr_matrix((A.shape[1], A.shape[1]))
-        for J, w, sign in self.factors:
-            JA = J @ full
-            Ac = Ac + sign * (JA.T @ sp.diags(w) @ JA)
+        # Σ s (J A)ᵀ diag(w) (J A) as one product over the stacked factors
+        J = sp.vstack([f[0] for f in self.factors], format="csr")
+        w = np.concatenate([sign * wf for _, wf, sign in self.factors])
+        JA = J @ full
+        Ac = sp.csr_matrix(JA.T @ (sp.diags(w) @ JA))
         Ac = Ac + _RIDGE * Ac.diagonal().mean() * sp.eye(A.shape[1])
         t3 = time.perf_counter()
         self.A = A.tocsr()
         self.At = sp.csr_matrix(self.A.T)
         self.coarse_factor = FixedQuadratic(Ac, np.zeros(0, dtype=np.int64), ls.linear_solver)
         self.factorizations += 1
+        if state.rotations is not None:
+            self.built_rotations = state.rotations[ls.free].copy()
         t4 = time.perf_counter()
         for key, dt in zip(self.seconds, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
             self.seconds[key] += dt
-        return True
+        return first
 
     def _coarse(self, v: np.ndarray) -> np.ndarray:
         """``A A_c⁻¹ Aᵀ v`` for ``v`` of shape (3 n_free,)."""

@@ -1,0 +1,187 @@
+"""Why the two-level preconditioner failed on the tube, and what makes its count flatter.
+
+Usage::
+
+    python pipelines/coarse_study.py run tube 10000 [40000 ...]   # iterations table
+    python pipelines/coarse_study.py pcg tube 2500 10000            # linear PCG counts
+    python pipelines/coarse_study.py line tube 10000                # energy along steps
+
+``run`` joins the end-to-end tube (``tube``) or the partial patch
+(``patch``) with about the given number of guest vertices three ways from
+the same start, tolerance and quasi-Newton memory: L-BFGS on ``P`` (the
+default), the two-level model as first built (rigid cluster motions, built
+once at the start) and as it is now (bending motions too, rebuilt when the
+guest has turned). It prints iterations, rejected line-search trials,
+coarse builds, seconds (the model's set-up included) and the final energy
+against the default run's (relative; negative is lower), and the iteration
+at which each run first came within 1e-2 .. 1e-6 of the default's final
+energy.
+
+``pcg`` counts the conjugate-gradient iterations that solve the
+Gauss–Newton model at the default run's minimum (random right-hand side,
+residual 1e-6 in the preconditioner's norm) with ``P⁻¹`` and the additive
+two-level forms: a linear measure of how well each coarse space captures
+the slow modes, free of the line search.
+
+``line`` evaluates the true energy along the fine (``−P⁻¹ g``), coarse
+(``−C g``) and summed steps at a few iterates of the default run, against
+the Gauss–Newton model's prediction: where the model's curvature is wrong
+the ratio departs from 1.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+import igljoin  # noqa: E402
+from igljoin import phantoms, twolevel  # noqa: E402
+
+#: Scenario and guest vertices at guest_resolution 1.
+_BASE = {"tube": ("end_to_end", 2436), "patch": ("partial_patch", 1180)}
+
+#: The two-level models compared with the default run.
+VARIANTS = {
+    "rigid, built once": dict(bending=False, rebuild_angle=None),
+    "bending, built once": dict(rebuild_angle=None),
+    "bending, rebuilt": dict(),
+}
+
+
+def join_solver(kind: str, vertices: float, length: str = "equal"):
+    """A JoinSolver of the tube or patch with about ``vertices`` guest vertices."""
+    scenario, base = _BASE[kind]
+    r = float(np.sqrt(vertices / base))
+    s = phantoms.paper_sample(scenario, length, guest_resolution=r)
+    return igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+
+
+def run(solver, model=None, **kw):
+    """The join's iteration from its own start; returns ``(IterationResult, seconds)``."""
+    ls, opt = solver.solver, solver.options
+    settings = dict(
+        max_iterations=kw.pop("max_iterations", 3000),
+        tolerance=kw.pop("tolerance", opt.energy_tolerance),
+        scale=solver.guest_mean_edge,
+        acceleration=opt.acceleration,
+    )
+    t0 = time.perf_counter()
+    out = ls.run(solver.initial_guess(), solver.corr.targets, model=model, **settings, **kw)
+    return out, time.perf_counter() - t0
+
+
+def _row(kind, n, name, res, seconds, e_ref, builds="") -> None:
+    rel = (np.asarray(res.energy) - e_ref) / e_ref
+    reach = [
+        int(np.argmax(rel <= q)) if (rel <= q).any() else "-" for q in 10.0 ** -np.arange(2, 7)
+    ]
+    gap = (res.energy[-1] - e_ref) / e_ref
+    print(
+        f"| {kind} | {n} | {name} | {res.iterations} | {res.stats['rejected']} | {builds} "
+        f"| {seconds:.1f} | {gap:+.1e} | {' / '.join(map(str, reach))} |",
+        flush=True,
+    )
+
+
+def table(kind: str, sizes: list) -> None:
+    print("| case | n | model | iterations | rejected | builds | s | gap | reach 1e-2..1e-6 |")
+    print("|---|---:|---|---:|---:|---:|---:|---:|---|")
+    for v in sizes:
+        solver = join_solver(kind, v)
+        n = solver.solver.n
+        # the first run of a process compiles the quasi-Newton kernels: not timed
+        run(solver, max_iterations=2)
+        base, seconds = run(solver)
+        e_ref = base.energy[-1]
+        _row(kind, n, "P", base, seconds, e_ref)
+        for name, kw in VARIANTS.items():
+            model = twolevel.TwoLevelModel(solver.solver, **kw)
+            res, seconds = run(solver, model)
+            _row(kind, n, name, res, seconds, e_ref, model.factorizations)
+
+
+def _pcg(H, M, b, tol=1e-6, maxit=3000) -> int:
+    x, r = np.zeros_like(b), b.copy()
+    z = M(r)
+    p, rz = z.copy(), r @ z
+    start = np.sqrt(rz)
+    for k in range(1, maxit + 1):
+        Hp = H(p)
+        a = rz / (p @ Hp)
+        x += a * p
+        r -= a * Hp
+        z = M(r)
+        rz_new = r @ z
+        if np.sqrt(abs(rz_new)) <= tol * start:
+            return k
+        p = z + (rz_new / rz) * p
+        rz = rz_new
+    return maxit
+
+
+def pcg(kind: str, sizes: list) -> None:
+    for v in sizes:
+        solver = join_solver(kind, v)
+        ls = solver.solver
+        state, _, _ = ls.local(run(solver)[0].X)
+        nf = len(ls.free)
+
+        def fine(r, ls=ls, nf=nf):
+            return ls.factor.solve_free(r.reshape(nf, 3)).reshape(-1)
+
+        b = np.random.default_rng(0).standard_normal(3 * nf)
+        out = []
+        H = None
+        for name, kw in {"rigid": dict(bending=False), "rigid and bending": {}}.items():
+            model = twolevel.TwoLevelModel(ls, **kw)
+            model.refresh(state, 1)
+            H = model._model
+            count = _pcg(H, lambda r, m=model: fine(r) + m._coarse(r), b)
+            out.append(f"{name} {count} ({model.A.shape[1]} coarse unknowns)")
+        print(f"{kind} n={ls.n}: P {_pcg(H, fine, b)}, " + ", ".join(out), flush=True)
+
+
+def line(kind: str, vertices: float, at=(0, 20, 60)) -> None:
+    solver = join_solver(kind, vertices)
+    ls = solver.solver
+    for k in at:
+        X = run(solver, max_iterations=k)[0].X if k else solver.initial_guess()
+        X[ls.fixed] = solver.corr.targets
+        state, e, G = ls.local(X)
+        g = G[ls.free]
+        model = twolevel.TwoLevelModel(ls)
+        model.refresh(state, 1)
+        steps = {"fine": -ls.factor.solve_free(g)}
+        steps["coarse"] = -model._coarse(g.reshape(-1)).reshape(g.shape)
+        steps["sum"] = steps["fine"] + steps["coarse"]
+        for name, d in steps.items():
+            gd = float(np.vdot(g, d))
+            dHd = float(d.reshape(-1) @ model._model(d.reshape(-1)))
+            ts = np.array([0.05, 0.25, 1.0])
+            es = []
+            for t in ts:
+                Xt = X.copy()
+                Xt[ls.free] += t * d
+                es.append(ls.local(Xt, state.rotations)[1])
+            # true curvature over the model's, from E(t) = E + 2 t gᵀd + t² c
+            ratio = (np.asarray(es) - e - 2 * ts * gd) / ts**2 / dHd
+            print(
+                f"{kind} n={ls.n} it {k}: {name:6s} model's best t {-gd / dHd:.2f}, "
+                f"true/model curvature at t=0.05, 0.25, 1: {np.round(ratio, 2)}",
+                flush=True,
+            )
+
+
+def main(argv: list) -> None:
+    what, kind, sizes = argv[0], argv[1], [float(v) for v in argv[2:]]
+    {"run": table, "pcg": pcg}.get(what, lambda k, s: line(k, s[0]))(kind, sizes)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
