@@ -17,7 +17,12 @@ back-substitution. Two backends give the same answer (to rounding):
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import functools
+import importlib.metadata
 import importlib.util
+import weakref
 
 import igl
 import numpy as np
@@ -25,46 +30,215 @@ import scipy.sparse as sp
 
 from .errors import MissingExtraError, OptionsError, SolveError
 
-__all__ = ["BACKENDS", "FixedQuadratic", "available_backends", "resolve_backend"]
+__all__ = [
+    "BACKENDS",
+    "PARDISO_FROM",
+    "FixedQuadratic",
+    "available_backends",
+    "resolve_backend",
+]
 
 #: Names accepted by ``linear_solver``.
-BACKENDS = ("auto", "igl", "cholespy")
+BACKENDS = ("auto", "igl", "cholespy", "pardiso")
+
+#: Free vertices from which ``"auto"`` factors with Pardiso when it is installed
+#: (measured crossing: see the module docstring).
+PARDISO_FROM = 30_000
 
 _NOT_FACTORED = (
     "the deformation system could not be factored (a part of the guest is not held by any "
     "term); check that every guest component touches the seam"
 )
 
+_EXTRAS = {"cholespy": ("cholespy", "fast"), "pardiso": ("mkl", "pardiso")}
+
 
 def available_backends() -> list[str]:
-    """Backends that can run here (``"igl"`` always; ``"cholespy"`` if installed)."""
+    """Backends that can run here (``"igl"`` always; the others if installed)."""
     out = ["igl"]
     if importlib.util.find_spec("cholespy") is not None:
         out.append("cholespy")
+    if _mkl_rt_path() is not None:
+        out.append("pardiso")
     return out
 
 
-def resolve_backend(name: str) -> str:
-    """The concrete backend for ``name`` (``"auto"`` → cholespy if installed, else igl).
+def resolve_backend(name: str, n_free: int | None = None) -> str:
+    """The concrete backend for ``name``.
+
+    ``"auto"`` is Pardiso for ``n_free >= PARDISO_FROM`` free vertices when
+    it is installed, else cholespy when installed, else libigl.
+
+    Parameters
+    ----------
+    name : {"auto", "igl", "cholespy", "pardiso"}
+    n_free : int, optional
+        Size of the system to factor (``None``: a small one).
 
     Raises
     ------
     OptionsError
         Unknown name.
     MissingExtraError
-        ``"cholespy"`` asked for but not installed.
+        ``"cholespy"`` or ``"pardiso"`` asked for but not installed.
     """
     if name not in BACKENDS:
         raise OptionsError(f"linear_solver={name!r} is not one of {', '.join(map(repr, BACKENDS))}")
     have = available_backends()
     if name == "auto":
+        if "pardiso" in have and n_free is not None and n_free >= PARDISO_FROM:
+            return "pardiso"
         return "cholespy" if "cholespy" in have else "igl"
     if name not in have:
+        package, extra = _EXTRAS[name]
         raise MissingExtraError(
-            "linear_solver='cholespy' needs the cholespy package: pip install 'igljoin[fast]' "
-            "(or use linear_solver='igl')"
+            f"linear_solver={name!r} needs the {package} package, which is not installed: "
+            f"pip install 'igljoin[{extra}]' (or use linear_solver='igl')"
         )
     return name
+
+
+# -- MKL Pardiso through ctypes -------------------------------------------------------------
+
+_PARDISO_ERRORS = {
+    -1: "input inconsistent",
+    -2: "not enough memory",
+    -3: "reordering problem",
+    -4: "zero pivot (the matrix is not positive definite)",
+    -5: "internal error",
+    -6: "reordering failed",
+    -7: "diagonal matrix problem",
+    -8: "32-bit integer overflow",
+}
+
+
+class _PardisoError(RuntimeError):
+    """Pardiso returned an error code (the message says which)."""
+
+    def __init__(self, phase: int, code: int):
+        self.code = code
+        what = _PARDISO_ERRORS.get(code, "unclassified error")
+        super().__init__(f"Pardiso phase {phase} failed with error {code} ({what})")
+
+
+@functools.lru_cache(maxsize=1)
+def _mkl_rt_path() -> str | None:
+    """Path of MKL's single dynamic library: from the ``mkl`` wheel, else the system's."""
+    try:
+        files = importlib.metadata.files("mkl") or []
+    except importlib.metadata.PackageNotFoundError:
+        files = []
+    for f in files:
+        if f.name.startswith(("libmkl_rt.so", "libmkl_rt.", "mkl_rt.")):
+            return str(f.locate())
+    return ctypes.util.find_library("mkl_rt")
+
+
+@functools.lru_cache(maxsize=1)
+def _mkl_rt() -> tuple[ctypes.CDLL, type]:
+    """MKL loaded once, with its integer type (LP64 unless the process chose ILP64)."""
+    lib = ctypes.CDLL(_mkl_rt_path())
+    layer = lib.MKL_Set_Interface_Layer(ctypes.c_int(0))  # 0: LP64; returns the one in force
+    return lib, (np.int64 if layer == 1 else np.int32)
+
+
+def _pardiso_call(lib, itype, pt, iparm, phase, n, a, ia, ja, nrhs, b, x) -> None:
+    """One call of ``pardiso`` (real SPD matrix type 2, one factor, no message output)."""
+    ct = ctypes.c_int64 if itype is np.int64 else ctypes.c_int32
+    err = ct(0)
+    ptr = ctypes.c_void_p
+
+    def arr(v):
+        return ptr(None) if v is None else v.ctypes.data_as(ptr)
+
+    lib.pardiso(
+        arr(pt),
+        ctypes.byref(ct(1)),  # maxfct
+        ctypes.byref(ct(1)),  # mnum
+        ctypes.byref(ct(2)),  # mtype: real symmetric positive definite
+        ctypes.byref(ct(phase)),
+        ctypes.byref(ct(n)),
+        arr(a),
+        arr(ia),
+        arr(ja),
+        ptr(None),  # perm
+        ctypes.byref(ct(nrhs)),
+        arr(iparm),
+        ctypes.byref(ct(0)),  # msglvl
+        arr(b),
+        arr(x),
+        ctypes.byref(err),
+    )
+    if err.value != 0:
+        raise _PardisoError(phase, int(err.value))
+
+
+def _pardiso_release(lib, itype, pt, iparm, n) -> None:
+    """Free Pardiso's memory for ``pt`` (phase -1)."""
+    try:
+        _pardiso_call(lib, itype, pt, iparm, -1, n, None, None, None, 1, None, None)
+    except _PardisoError:  # nothing left to free
+        pass
+
+
+class _Pardiso:
+    """Supernodal Cholesky of an SPD matrix with MKL Pardiso (METIS ordering).
+
+    Parameters
+    ----------
+    A : sparse matrix, shape (m, m)
+        Symmetric positive definite; only its upper triangle is read.
+    """
+
+    def __init__(self, A: sp.spmatrix):
+        self.lib, self.itype = _mkl_rt()
+        T = sp.triu(sp.coo_matrix(A), format="coo")
+        d = np.arange(A.shape[0])
+        # Pardiso needs every diagonal entry stored, zero or not (a missing one is an error)
+        U = sp.coo_matrix(
+            (np.r_[T.data, np.zeros(d.size)], (np.r_[T.row, d], np.r_[T.col, d])), shape=A.shape
+        ).tocsr()
+        U.sort_indices()
+        self.n = U.shape[0]
+        self.a = np.ascontiguousarray(U.data, dtype=np.float64)
+        self.ia = np.ascontiguousarray(U.indptr, dtype=self.itype)
+        self.ja = np.ascontiguousarray(U.indices, dtype=self.itype)
+        self.pt = np.zeros(64, dtype=np.int64)  # Pardiso's handle: 64 pointers
+        self.iparm = np.zeros(64, dtype=self.itype)
+        self.iparm[0] = 1  # the iparm given here, not the defaults
+        self.iparm[1] = 2  # METIS nested-dissection ordering
+        self.iparm[17] = -1  # report the factor's nonzeros (read by pipelines/factor_study.py)
+        self.iparm[34] = 1  # zero-based indices
+        one = np.zeros(1)
+        args = (self.lib, self.itype, self.pt, self.iparm)
+        weakref.finalize(self, _pardiso_release, *args, self.n)
+        _pardiso_call(*args, 12, self.n, self.a, self.ia, self.ja, 1, one, one.copy())
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """``A⁻¹ b`` for ``b`` of shape (m, k); returns shape (m, k)."""
+        k = b.shape[1]
+        bt = np.ascontiguousarray(b.T)  # column after column, as Pardiso reads them
+        xt = np.empty_like(bt)
+        # the back-solve on one thread: two were slower at every size measured (module doc)
+        before = self.lib.MKL_Set_Num_Threads_Local(ctypes.c_int(1))
+        try:
+            _pardiso_call(
+                self.lib,
+                self.itype,
+                self.pt,
+                self.iparm,
+                33,
+                self.n,
+                self.a,
+                self.ia,
+                self.ja,
+                k,
+                bt,
+                xt,
+            )
+        finally:
+            self.lib.MKL_Set_Num_Threads_Local(ctypes.c_int(before))
+        return xt.T.copy()
 
 
 class FixedQuadratic:
@@ -101,7 +275,6 @@ class FixedQuadratic:
     made = 0
 
     def __init__(self, Q: sp.spmatrix, fixed: np.ndarray, backend: str = "auto"):
-        self.backend = resolve_backend(backend)
         Q = sp.csr_matrix(Q)
         n = Q.shape[0]
         self.n = n
@@ -109,6 +282,7 @@ class FixedQuadratic:
         mask = np.ones(n, dtype=bool)
         mask[self.fixed] = False
         self.free = np.flatnonzero(mask)
+        self.backend = resolve_backend(backend, self.free.size)
         rows = Q[self.free]
         self.Qff = sp.csr_matrix(rows[:, self.free])
         self.Qfb = sp.csr_matrix(rows[:, self.fixed])
@@ -117,10 +291,26 @@ class FixedQuadratic:
         FixedQuadratic.made += 1
         if self.backend == "igl":
             self._data = igl.min_quad_with_fixed_data()
-            ok = igl.min_quad_with_fixed_precompute(
-                sp.csc_matrix(Q), self.fixed, sp.csc_matrix((0, n)), True, self._data
-            )
+            try:
+                ok = igl.min_quad_with_fixed_precompute(
+                    sp.csc_matrix(Q), self.fixed, sp.csc_matrix((0, n)), True, self._data
+                )
+            except RuntimeError:  # libigl raises on some singular systems, returns False on others
+                ok = False
             if ok is False:
+                raise SolveError(_NOT_FACTORED)
+        elif self.backend == "pardiso":
+            try:
+                self._pardiso = _Pardiso(self.Qff)
+            except _PardisoError as exc:
+                if exc.code in (-4, -7):
+                    raise SolveError(_NOT_FACTORED) from exc
+                raise SolveError(
+                    f"{exc}; the deformation system could not be factored with "
+                    "linear_solver='pardiso': use linear_solver='cholespy' or 'igl'"
+                ) from exc
+            probe = self.solve_free(np.ones((self.free.size, 1)))
+            if not np.isfinite(probe).all():
                 raise SolveError(_NOT_FACTORED)
         else:
             import cholespy
@@ -151,6 +341,8 @@ class FixedQuadratic:
             x = np.empty_like(b)
             self._chol.solve(b, x)
             return x
+        if self.backend == "pardiso":
+            return self._pardiso.solve(b)
         B = np.zeros((self.n, b.shape[1]))
         B[self.free] = -b
         X = igl.min_quad_with_fixed_solve(

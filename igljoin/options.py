@@ -258,11 +258,14 @@ class JoinOptions:
         long tubes none fewer, and below a few thousand vertices its set-up
         costs more than it saves (docs/limits.md). It preconditions the
         quasi-Newton steps, so it needs ``acceleration`` > 0.
-    linear_solver : {"auto", "igl", "cholespy"}
+    linear_solver : {"auto", "igl", "cholespy", "pardiso"}
         Sparse Cholesky backend of the global step: libigl's
-        ``min_quad_with_fixed`` (always available) or cholespy (the
-        ``igljoin[fast]`` extra, several times faster back-substitutions).
-        ``"auto"`` (default) uses cholespy when it is installed. Results
+        ``min_quad_with_fixed`` (always available), cholespy (the
+        ``igljoin[fast]`` extra, several times faster back-substitutions) or
+        MKL Pardiso (the ``igljoin[pardiso]`` extra, a supernodal
+        factorization several times faster on large guests). ``"auto"``
+        (default) uses Pardiso from :data:`igljoin.linsolve.PARDISO_FROM`
+        free vertices on and cholespy below, each when installed. Results
         agree to rounding.
 
     Notes
@@ -352,7 +355,7 @@ class JoinOptions:
             ("stiffness_on", ("auto", "vertex", "face")),
             ("initial_guess", ("extend", "rigid")),
             ("preconditioner", ("factored", "two-level")),
-            ("linear_solver", ("auto", "igl", "cholespy")),
+            ("linear_solver", ("auto", "igl", "cholespy", "pardiso")),
         ):
             value = getattr(self, name)
             if not isinstance(value, str) or value not in allowed:
