@@ -3,7 +3,7 @@
 The global step of the join minimises ``½ xᵀ Q x − xᵀ B`` with the rows
 ``fixed`` held at ``bc``: ``Q_ff x_f = B_f − Q_fb bc``. ``Q`` never changes
 during a solve, so it is factored once and every iteration is a
-back-substitution. Two backends give the same answer (to rounding):
+back-substitution. Three backends give the same answer (to rounding):
 
 * ``"igl"`` — libigl's ``min_quad_with_fixed_precompute`` / ``_solve``;
   always available (libigl is a dependency).
@@ -11,8 +11,59 @@ back-substitution. Two backends give the same answer (to rounding):
   ``igljoin[fast]`` extra); its back-substitutions are several times faster
   (0.2 ms for a paper-sized guest, the fastest of the backends measured in
   docs/benchmarks.md).
+* ``"pardiso"`` — MKL Pardiso's supernodal Cholesky (METIS nested
+  dissection) of ``Q_ff``, called through ctypes from the ``mkl`` wheel's
+  ``libmkl_rt`` (the ``igljoin[pardiso]`` extra; Intel Simplified Software
+  License: free to use and redistribute, binary only). The factorization
+  runs on MKL's threads (``MKL_NUM_THREADS``), each back-solve on one
+  (two were no faster at any size measured).
 
-``"auto"`` picks cholespy when it is installed and libigl otherwise.
+``"auto"`` picks Pardiso for systems of :data:`PARDISO_FROM_NNZ` (2
+million) stored nonzeros and more and cholespy below, each when it is
+installed, and libigl otherwise. The number of nonzeros, not of rows,
+decides: Pardiso's gain is its faster factorization, which counts where
+the preconditioner is dense (the default band smooth-join term makes it
+so from about 30k guest vertices on) or large.
+
+Why (``pipelines/factor_study.py`` on the join's own preconditioner ``P_ff``,
+partial patch guests; 2 shared cores under load, so the ratios count more
+than the seconds). Default options (band smooth join):
+
+| free rows | backend | factor (s) | 3-col back-solve (ms) | factor + it × back-solve (s) |
+|---:|---|---:|---:|---:|
+| 9,478 (0.45 M nonzeros) | cholespy | 0.51 | 17.1 | 2.2 (100 it) |
+| | pardiso | 0.38 | 17.3 | 2.1 |
+| 28,046 (3.0 M) | cholespy | 5.4 | 82 | 19.4 (172 it) |
+| | pardiso | 1.9 | 77 | 15.2 |
+| 93,738 (30 M) | cholespy | 170 | 600 | 320 (250 it) |
+| | pardiso | 20 | 292 | 93 |
+
+``smooth_mode="robust"`` (a sparser ``P``; the 1M guest is the end-to-end
+tube, whose band-mode ``P`` is too dense to assemble: about 560 nonzeros a
+row at 160k, growing with the guest's resolution):
+
+| free rows | backend | factor (s) | 3-col back-solve (ms) | factor + it × back-solve (s) |
+|---:|---|---:|---:|---:|
+| 9,478 (0.18 M nonzeros) | cholespy | 0.25 | 3.1 | 0.6 (100 it) |
+| | pardiso | 0.40 | 16.7 | 2.1 |
+| 28,046 (0.54 M) | cholespy | 1.1 | 46 | 8.9 (172 it) |
+| | pardiso | 0.66 | 54 | 9.9 |
+| 93,738 (1.8 M) | cholespy | 6.4 | 135 | 40.1 (250 it) |
+| | pardiso | 2.4 | 147 | 39.2 |
+| 997,858 (23 M) | cholespy | 264 | 1,328 | 928 (500 it) |
+| | pardiso | 29 | 1,059 | 558 |
+
+Below about 2 M nonzeros cholespy's back-solve is as fast or faster (5 ×
+on the sparse 10k system) and its factorization costs little; above,
+Pardiso factors 3 to 9 × faster and back-solves as fast or faster.
+Measured and not chosen: scipy's SuperLU (symmetric mode, no pivoting)
+factors faster than cholespy on the dense band systems but back-solves 2 ×
+slower; a nested-dissection (METIS) or reverse Cuthill–McKee order given
+to cholespy changes nothing (CHOLMOD reorders with AMD itself); QDLDL and
+pypardiso's own ``spsolve`` (it hashes the matrix on every call and treats
+it as unsymmetric) back-solve 3 to 7 × slower; two MKL threads made the
+back-solve slower or no faster (4 × slower at 10k), which is why it runs
+on one.
 """
 
 from __future__ import annotations
@@ -32,7 +83,7 @@ from .errors import MissingExtraError, OptionsError, SolveError
 
 __all__ = [
     "BACKENDS",
-    "PARDISO_FROM",
+    "PARDISO_FROM_NNZ",
     "FixedQuadratic",
     "available_backends",
     "resolve_backend",
@@ -41,9 +92,9 @@ __all__ = [
 #: Names accepted by ``linear_solver``.
 BACKENDS = ("auto", "igl", "cholespy", "pardiso")
 
-#: Free vertices from which ``"auto"`` factors with Pardiso when it is installed
-#: (measured crossing: see the module docstring).
-PARDISO_FROM = 30_000
+#: Stored nonzeros of ``Q_ff`` from which ``"auto"`` factors with Pardiso when it is
+#: installed (the measured crossing: see the module docstring).
+PARDISO_FROM_NNZ = 2_000_000
 
 _NOT_FACTORED = (
     "the deformation system could not be factored (a part of the guest is not held by any "
@@ -63,17 +114,18 @@ def available_backends() -> list[str]:
     return out
 
 
-def resolve_backend(name: str, n_free: int | None = None) -> str:
+def resolve_backend(name: str, nnz: int | None = None) -> str:
     """The concrete backend for ``name``.
 
-    ``"auto"`` is Pardiso for ``n_free >= PARDISO_FROM`` free vertices when
-    it is installed, else cholespy when installed, else libigl.
+    ``"auto"`` is Pardiso for a system of ``nnz >= PARDISO_FROM_NNZ``
+    stored nonzeros when it is installed, else cholespy when installed, else
+    libigl.
 
     Parameters
     ----------
     name : {"auto", "igl", "cholespy", "pardiso"}
-    n_free : int, optional
-        Size of the system to factor (``None``: a small one).
+    nnz : int, optional
+        Stored nonzeros of the system to factor (``None``: a small one).
 
     Raises
     ------
@@ -86,7 +138,7 @@ def resolve_backend(name: str, n_free: int | None = None) -> str:
         raise OptionsError(f"linear_solver={name!r} is not one of {', '.join(map(repr, BACKENDS))}")
     have = available_backends()
     if name == "auto":
-        if "pardiso" in have and n_free is not None and n_free >= PARDISO_FROM:
+        if "pardiso" in have and nnz is not None and nnz >= PARDISO_FROM_NNZ:
             return "pardiso"
         return "cholespy" if "cholespy" in have else "igl"
     if name not in have:
@@ -219,7 +271,7 @@ class _Pardiso:
         k = b.shape[1]
         bt = np.ascontiguousarray(b.T)  # column after column, as Pardiso reads them
         xt = np.empty_like(bt)
-        # the back-solve on one thread: two were slower at every size measured (module doc)
+        # the back-solve on one thread: two were no faster at any size measured (module doc)
         before = self.lib.MKL_Set_Num_Threads_Local(ctypes.c_int(1))
         try:
             _pardiso_call(
@@ -282,10 +334,10 @@ class FixedQuadratic:
         mask = np.ones(n, dtype=bool)
         mask[self.fixed] = False
         self.free = np.flatnonzero(mask)
-        self.backend = resolve_backend(backend, self.free.size)
         rows = Q[self.free]
         self.Qff = sp.csr_matrix(rows[:, self.free])
         self.Qfb = sp.csr_matrix(rows[:, self.fixed])
+        self.backend = resolve_backend(backend, self.Qff.nnz)
         if not self.free.size:
             return
         FixedQuadratic.made += 1

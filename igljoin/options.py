@@ -263,9 +263,10 @@ class JoinOptions:
         ``min_quad_with_fixed`` (always available), cholespy (the
         ``igljoin[fast]`` extra, several times faster back-substitutions) or
         MKL Pardiso (the ``igljoin[pardiso]`` extra, a supernodal
-        factorization several times faster on large guests). ``"auto"``
-        (default) uses Pardiso from :data:`igljoin.linsolve.PARDISO_FROM`
-        free vertices on and cholespy below, each when installed. Results
+        factorization several times faster on large or dense systems).
+        ``"auto"`` (default) uses Pardiso from
+        :data:`igljoin.linsolve.PARDISO_FROM_NNZ` nonzeros on (about 30k
+        guest vertices) and cholespy below, each when installed. Results
         agree to rounding.
 
     Notes

@@ -75,6 +75,7 @@ def iterations(size: int) -> int:
     xs = np.log(list(ITERATIONS))
     return int(round(float(np.interp(np.log(size), xs, list(ITERATIONS.values())))))
 
+
 METHODS = (
     "igl",
     "cholespy",
@@ -161,7 +162,8 @@ def _nd_order(A: sp.csr_matrix) -> np.ndarray:
     G = sp.csr_matrix(A, copy=True)
     G.setdiag(0)
     G.eliminate_zeros()
-    perm, _ = pymetis.nested_dissection(xadj=G.indptr, adjncy=G.indices)
+    graph = pymetis.CSRAdjacency(adj_starts=G.indptr, adjacent=G.indices)
+    perm, _ = pymetis.nested_dissection(adjacency=graph)
     return np.asarray(perm, dtype=np.int64)
 
 

@@ -84,11 +84,11 @@ def test_backend_choice():
     assert linsolve.resolve_backend("igl") == "igl"
     expected = "cholespy" if HAVE_CHOLESPY else "igl"
     assert linsolve.resolve_backend("auto") == expected
-    # "auto" by size: Pardiso from PARDISO_FROM free vertices on, where it is installed
-    small = linsolve.PARDISO_FROM - 1
+    # "auto" by size: Pardiso from PARDISO_FROM_NNZ nonzeros on, where it is installed
+    small = linsolve.PARDISO_FROM_NNZ - 1
     assert linsolve.resolve_backend("auto", small) == expected
     large = "pardiso" if HAVE_PARDISO else expected
-    assert linsolve.resolve_backend("auto", linsolve.PARDISO_FROM) == large
+    assert linsolve.resolve_backend("auto", linsolve.PARDISO_FROM_NNZ) == large
     with pytest.raises(igljoin.OptionsError, match="linear_solver"):
         linsolve.resolve_backend("umfpack")
     with pytest.raises(igljoin.OptionsError, match="linear_solver"):
