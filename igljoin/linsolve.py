@@ -104,14 +104,17 @@ _NOT_FACTORED = (
 _EXTRAS = {"cholespy": ("cholespy", "fast"), "pardiso": ("mkl", "pardiso")}
 
 
+def _installed(backend: str) -> bool:
+    if backend == "igl":
+        return True
+    if backend == "cholespy":
+        return importlib.util.find_spec("cholespy") is not None
+    return _mkl_rt_path() is not None  # looked for only when needed: it takes ~40 ms
+
+
 def available_backends() -> list[str]:
     """Backends that can run here (``"igl"`` always; the others if installed)."""
-    out = ["igl"]
-    if importlib.util.find_spec("cholespy") is not None:
-        out.append("cholespy")
-    if _mkl_rt_path() is not None:
-        out.append("pardiso")
-    return out
+    return [b for b in BACKENDS[1:] if _installed(b)]
 
 
 def resolve_backend(name: str, nnz: int | None = None) -> str:
@@ -136,12 +139,11 @@ def resolve_backend(name: str, nnz: int | None = None) -> str:
     """
     if name not in BACKENDS:
         raise OptionsError(f"linear_solver={name!r} is not one of {', '.join(map(repr, BACKENDS))}")
-    have = available_backends()
     if name == "auto":
-        if "pardiso" in have and nnz is not None and nnz >= PARDISO_FROM_NNZ:
+        if nnz is not None and nnz >= PARDISO_FROM_NNZ and _installed("pardiso"):
             return "pardiso"
-        return "cholespy" if "cholespy" in have else "igl"
-    if name not in have:
+        return "cholespy" if _installed("cholespy") else "igl"
+    if not _installed(name):
         package, extra = _EXTRAS[name]
         raise MissingExtraError(
             f"linear_solver={name!r} needs the {package} package, which is not installed: "
