@@ -18,12 +18,12 @@ back-substitution. Three backends give the same answer (to rounding):
   runs on MKL's threads (``MKL_NUM_THREADS``), each back-solve on one
   (two were no faster at any size measured).
 
-``"auto"`` picks Pardiso for systems of :data:`PARDISO_FROM_NNZ` (2
+``"auto"`` picks Pardiso for systems of :data:`PARDISO_FROM_NNZ` (10
 million) stored nonzeros and more and cholespy below, each when it is
 installed, and libigl otherwise. The number of nonzeros, not of rows,
 decides: Pardiso's gain is its faster factorization, which counts where
-the preconditioner is dense (the default band smooth-join term makes it
-so from about 30k guest vertices on) or large.
+the preconditioner is dense (the default band smooth-join term passes 10
+million nonzeros at about 55k guest vertices) or very large.
 
 Why (``pipelines/factor_study.py`` on the join's own preconditioner ``P_ff``,
 partial patch guests; 2 shared cores under load, so the ratios count more
@@ -53,9 +53,20 @@ row at 160k, growing with the guest's resolution):
 | 997,858 (23 M) | cholespy | 264 | 1,328 | 928 (500 it) |
 | | pardiso | 29 | 1,059 | 558 |
 
-Below about 2 M nonzeros cholespy's back-solve is as fast or faster (5 ×
-on the sparse 10k system) and its factorization costs little; above,
-Pardiso factors 3 to 9 × faster and back-solves as fast or faster.
+Pardiso factors 3 to 9 × faster from 3 M nonzeros on; its back-solve is
+5 × slower on the sparse 10k system and, inside a join, about 1.15 ×
+slower at 100k (the study alone, under load, timed it faster). Whole
+joins of the 100k patch (default options, alternated runs, seconds; the
+same 248 iterations, final energies 2e-12 apart):
+
+| backend | join (3 runs) | factor (median) | back-solves (median) |
+|---|---|---:|---:|
+| pardiso | 173.9, 124.8, 133.3 | 31.2 | 51.7 |
+| cholespy | 130.4, 162.9, 199.2 | 86.1 | 44.9 |
+
+so Pardiso saves a fifth of the 100k join (medians 133 against 163 s) and
+more at 1M (robust; study only), while from 2 to 3 M nonzeros (30k band guest, 100k robust
+guest) the two are within the noise of a whole join: hence 10 M.
 Measured and not chosen: scipy's SuperLU (symmetric mode, no pivoting)
 factors faster than cholespy on the dense band systems but back-solves 2 ×
 slower; a nested-dissection (METIS) or reverse Cuthill–McKee order given
@@ -94,7 +105,7 @@ BACKENDS = ("auto", "igl", "cholespy", "pardiso")
 
 #: Stored nonzeros of ``Q_ff`` from which ``"auto"`` factors with Pardiso when it is
 #: installed (the measured crossing: see the module docstring).
-PARDISO_FROM_NNZ = 2_000_000
+PARDISO_FROM_NNZ = 10_000_000
 
 _NOT_FACTORED = (
     "the deformation system could not be factored (a part of the guest is not held by any "

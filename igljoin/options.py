@@ -265,7 +265,7 @@ class JoinOptions:
         MKL Pardiso (the ``igljoin[pardiso]`` extra, a supernodal
         factorization several times faster on large or dense systems).
         ``"auto"`` (default) uses Pardiso from
-        :data:`igljoin.linsolve.PARDISO_FROM_NNZ` nonzeros on (about 30k
+        :data:`igljoin.linsolve.PARDISO_FROM_NNZ` nonzeros on (about 55k
         guest vertices) and cholespy below, each when installed. Results
         agree to rounding.
 
