@@ -65,8 +65,9 @@ same 248 iterations, final energies 2e-12 apart):
 | cholespy | 130.4, 162.9, 199.2 | 86.1 | 44.9 |
 
 so Pardiso saves a fifth of the 100k join (medians 133 against 163 s) and
-more at 1M (robust; study only), while from 2 to 3 M nonzeros (30k band guest, 100k robust
-guest) the two are within the noise of a whole join: hence 10 M.
+more at 1M (robust; the study only), while from 2 to 3 M nonzeros (30k
+band guest, 100k robust guest) the two are within the noise of a whole
+join: hence 10 M.
 Measured and not chosen: scipy's SuperLU (symmetric mode, no pivoting)
 factors faster than cholespy on the dense band systems but back-solves 2 ×
 slower; a nested-dissection (METIS) or reverse Cuthill–McKee order given
