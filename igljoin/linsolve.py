@@ -3,7 +3,7 @@
 The global step of the join minimises ``½ xᵀ Q x − xᵀ B`` with the rows
 ``fixed`` held at ``bc``: ``Q_ff x_f = B_f − Q_fb bc``. ``Q`` never changes
 during a solve, so it is factored once and every iteration is a
-back-substitution. Two backends give the same answer (to rounding):
+back-substitution. Three backends give the same answer (to rounding):
 
 * ``"igl"`` — libigl's ``min_quad_with_fixed_precompute`` / ``_solve``;
   always available (libigl is a dependency).
@@ -11,13 +11,81 @@ back-substitution. Two backends give the same answer (to rounding):
   ``igljoin[fast]`` extra); its back-substitutions are several times faster
   (0.2 ms for a paper-sized guest, the fastest of the backends measured in
   docs/benchmarks.md).
+* ``"pardiso"`` — MKL Pardiso's supernodal Cholesky (METIS nested
+  dissection) of ``Q_ff``, called through ctypes from the ``mkl`` wheel's
+  ``libmkl_rt`` (the ``igljoin[pardiso]`` extra; Intel Simplified Software
+  License: free to use and redistribute, binary only). The factorization
+  runs on MKL's threads (``MKL_NUM_THREADS``), each back-solve on one
+  (two were no faster at any size measured).
 
-``"auto"`` picks cholespy when it is installed and libigl otherwise.
+``"auto"`` picks Pardiso for systems of :data:`PARDISO_FROM_NNZ` (10
+million) stored nonzeros and more and cholespy below, each when it is
+installed, and libigl otherwise. The number of nonzeros, not of rows,
+decides: Pardiso's gain is its faster factorization, which counts where
+the preconditioner is dense (the default band smooth-join term passes 10
+million nonzeros at about 55k guest vertices) or very large.
+
+Why (``pipelines/factor_study.py`` on the join's own preconditioner ``P_ff``,
+partial patch guests; 2 shared cores under load, so the ratios count more
+than the seconds). Default options (band smooth join):
+
+| free rows | backend | factor (s) | 3-col back-solve (ms) | factor + it × back-solve (s) |
+|---:|---|---:|---:|---:|
+| 9,478 (0.45 M nonzeros) | cholespy | 0.51 | 17.1 | 2.2 (100 it) |
+| | pardiso | 0.38 | 17.3 | 2.1 |
+| 28,046 (3.0 M) | cholespy | 5.4 | 82 | 19.4 (172 it) |
+| | pardiso | 1.9 | 77 | 15.2 |
+| 93,738 (30 M) | cholespy | 170 | 600 | 320 (250 it) |
+| | pardiso | 20 | 292 | 93 |
+
+``smooth_mode="robust"`` (a sparser ``P``; the 1M guest is the end-to-end
+tube, whose band-mode ``P`` is too dense to assemble: about 560 nonzeros a
+row at 160k, growing with the guest's resolution):
+
+| free rows | backend | factor (s) | 3-col back-solve (ms) | factor + it × back-solve (s) |
+|---:|---|---:|---:|---:|
+| 9,478 (0.18 M nonzeros) | cholespy | 0.25 | 3.1 | 0.6 (100 it) |
+| | pardiso | 0.40 | 16.7 | 2.1 |
+| 28,046 (0.54 M) | cholespy | 1.1 | 46 | 8.9 (172 it) |
+| | pardiso | 0.66 | 54 | 9.9 |
+| 93,738 (1.8 M) | cholespy | 6.4 | 135 | 40.1 (250 it) |
+| | pardiso | 2.4 | 147 | 39.2 |
+| 997,858 (23 M) | cholespy | 264 | 1,328 | 928 (500 it) |
+| | pardiso | 29 | 1,059 | 558 |
+
+Pardiso factors 3 to 9 × faster from 3 M nonzeros on; its back-solve is
+5 × slower on the sparse 10k system and, inside a join, about 1.15 ×
+slower at 100k (the study alone, under load, timed it faster). Whole
+joins of the 100k patch (default options, alternated runs, seconds; the
+same 248 iterations, final energies 2e-12 apart):
+
+| backend | join (3 runs) | factor (median) | back-solves (median) |
+|---|---|---:|---:|
+| pardiso | 173.9, 124.8, 133.3 | 31.2 | 51.7 |
+| cholespy | 130.4, 162.9, 199.2 | 86.1 | 44.9 |
+
+so Pardiso saves a fifth of the 100k join (medians 133 against 163 s) and
+more at 1M (robust; the study only), while from 2 to 3 M nonzeros (30k
+band guest, 100k robust guest) the two are within the noise of a whole
+join: hence 10 M.
+Measured and not chosen: scipy's SuperLU (symmetric mode, no pivoting)
+factors faster than cholespy on the dense band systems but back-solves 2 ×
+slower; a nested-dissection (METIS) or reverse Cuthill–McKee order given
+to cholespy changes nothing (CHOLMOD reorders with AMD itself); QDLDL and
+pypardiso's own ``spsolve`` (it hashes the matrix on every call and treats
+it as unsymmetric) back-solve 3 to 7 × slower; two MKL threads made the
+back-solve slower or no faster (4 × slower at 10k), which is why it runs
+on one.
 """
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import functools
+import importlib.metadata
 import importlib.util
+import weakref
 
 import igl
 import numpy as np
@@ -25,46 +93,218 @@ import scipy.sparse as sp
 
 from .errors import MissingExtraError, OptionsError, SolveError
 
-__all__ = ["BACKENDS", "FixedQuadratic", "available_backends", "resolve_backend"]
+__all__ = [
+    "BACKENDS",
+    "PARDISO_FROM_NNZ",
+    "FixedQuadratic",
+    "available_backends",
+    "resolve_backend",
+]
 
 #: Names accepted by ``linear_solver``.
-BACKENDS = ("auto", "igl", "cholespy")
+BACKENDS = ("auto", "igl", "cholespy", "pardiso")
+
+#: Stored nonzeros of ``Q_ff`` from which ``"auto"`` factors with Pardiso when it is
+#: installed (the measured crossing: see the module docstring).
+PARDISO_FROM_NNZ = 10_000_000
 
 _NOT_FACTORED = (
     "the deformation system could not be factored (a part of the guest is not held by any "
     "term); check that every guest component touches the seam"
 )
 
+_EXTRAS = {"cholespy": ("cholespy", "fast"), "pardiso": ("mkl", "pardiso")}
+
+
+def _installed(backend: str) -> bool:
+    if backend == "igl":
+        return True
+    if backend == "cholespy":
+        return importlib.util.find_spec("cholespy") is not None
+    return _mkl_rt_path() is not None  # looked for only when needed: it takes ~40 ms
+
 
 def available_backends() -> list[str]:
-    """Backends that can run here (``"igl"`` always; ``"cholespy"`` if installed)."""
-    out = ["igl"]
-    if importlib.util.find_spec("cholespy") is not None:
-        out.append("cholespy")
-    return out
+    """Backends that can run here (``"igl"`` always; the others if installed)."""
+    return [b for b in BACKENDS[1:] if _installed(b)]
 
 
-def resolve_backend(name: str) -> str:
-    """The concrete backend for ``name`` (``"auto"`` → cholespy if installed, else igl).
+def resolve_backend(name: str, nnz: int | None = None) -> str:
+    """The concrete backend for ``name``.
+
+    ``"auto"`` is Pardiso for a system of ``nnz >= PARDISO_FROM_NNZ``
+    stored nonzeros when it is installed, else cholespy when installed, else
+    libigl.
+
+    Parameters
+    ----------
+    name : {"auto", "igl", "cholespy", "pardiso"}
+    nnz : int, optional
+        Stored nonzeros of the system to factor (``None``: a small one).
 
     Raises
     ------
     OptionsError
         Unknown name.
     MissingExtraError
-        ``"cholespy"`` asked for but not installed.
+        ``"cholespy"`` or ``"pardiso"`` asked for but not installed.
     """
     if name not in BACKENDS:
         raise OptionsError(f"linear_solver={name!r} is not one of {', '.join(map(repr, BACKENDS))}")
-    have = available_backends()
     if name == "auto":
-        return "cholespy" if "cholespy" in have else "igl"
-    if name not in have:
+        if nnz is not None and nnz >= PARDISO_FROM_NNZ and _installed("pardiso"):
+            return "pardiso"
+        return "cholespy" if _installed("cholespy") else "igl"
+    if not _installed(name):
+        package, extra = _EXTRAS[name]
         raise MissingExtraError(
-            "linear_solver='cholespy' needs the cholespy package: pip install 'igljoin[fast]' "
-            "(or use linear_solver='igl')"
+            f"linear_solver={name!r} needs the {package} package, which is not installed: "
+            f"pip install 'igljoin[{extra}]' (or use linear_solver='igl')"
         )
     return name
+
+
+# -- MKL Pardiso through ctypes -------------------------------------------------------------
+
+_PARDISO_ERRORS = {
+    -1: "input inconsistent",
+    -2: "not enough memory",
+    -3: "reordering problem",
+    -4: "zero pivot (the matrix is not positive definite)",
+    -5: "internal error",
+    -6: "reordering failed",
+    -7: "diagonal matrix problem",
+    -8: "32-bit integer overflow",
+}
+
+
+class _PardisoError(RuntimeError):
+    """Pardiso returned an error code (the message says which)."""
+
+    def __init__(self, phase: int, code: int):
+        self.code = code
+        what = _PARDISO_ERRORS.get(code, "unclassified error")
+        super().__init__(f"Pardiso phase {phase} failed with error {code} ({what})")
+
+
+@functools.lru_cache(maxsize=1)
+def _mkl_rt_path() -> str | None:
+    """Path of MKL's single dynamic library: from the ``mkl`` wheel, else the system's."""
+    try:
+        files = importlib.metadata.files("mkl") or []
+    except importlib.metadata.PackageNotFoundError:
+        files = []
+    for f in files:
+        if f.name.startswith(("libmkl_rt.so", "libmkl_rt.", "mkl_rt.")):
+            return str(f.locate())
+    return ctypes.util.find_library("mkl_rt")
+
+
+@functools.lru_cache(maxsize=1)
+def _mkl_rt() -> tuple[ctypes.CDLL, type]:
+    """MKL loaded once, with its integer type (LP64 unless the process chose ILP64)."""
+    lib = ctypes.CDLL(_mkl_rt_path())
+    layer = lib.MKL_Set_Interface_Layer(ctypes.c_int(0))  # 0: LP64; returns the one in force
+    return lib, (np.int64 if layer == 1 else np.int32)
+
+
+def _pardiso_call(lib, itype, pt, iparm, phase, n, a, ia, ja, nrhs, b, x) -> None:
+    """One call of ``pardiso`` (real SPD matrix type 2, one factor, no message output)."""
+    ct = ctypes.c_int64 if itype is np.int64 else ctypes.c_int32
+    err = ct(0)
+    ptr = ctypes.c_void_p
+
+    def arr(v):
+        return ptr(None) if v is None else v.ctypes.data_as(ptr)
+
+    lib.pardiso(
+        arr(pt),
+        ctypes.byref(ct(1)),  # maxfct
+        ctypes.byref(ct(1)),  # mnum
+        ctypes.byref(ct(2)),  # mtype: real symmetric positive definite
+        ctypes.byref(ct(phase)),
+        ctypes.byref(ct(n)),
+        arr(a),
+        arr(ia),
+        arr(ja),
+        ptr(None),  # perm
+        ctypes.byref(ct(nrhs)),
+        arr(iparm),
+        ctypes.byref(ct(0)),  # msglvl
+        arr(b),
+        arr(x),
+        ctypes.byref(err),
+    )
+    if err.value != 0:
+        raise _PardisoError(phase, int(err.value))
+
+
+def _pardiso_release(lib, itype, pt, iparm, n) -> None:
+    """Free Pardiso's memory for ``pt`` (phase -1)."""
+    try:
+        _pardiso_call(lib, itype, pt, iparm, -1, n, None, None, None, 1, None, None)
+    except _PardisoError:  # nothing left to free
+        pass
+
+
+class _Pardiso:
+    """Supernodal Cholesky of an SPD matrix with MKL Pardiso (METIS ordering).
+
+    Parameters
+    ----------
+    A : sparse matrix, shape (m, m)
+        Symmetric positive definite; only its upper triangle is read.
+    """
+
+    def __init__(self, A: sp.spmatrix):
+        self.lib, self.itype = _mkl_rt()
+        T = sp.triu(sp.coo_matrix(A), format="coo")
+        d = np.arange(A.shape[0])
+        # Pardiso needs every diagonal entry stored, zero or not (a missing one is an error)
+        U = sp.coo_matrix(
+            (np.r_[T.data, np.zeros(d.size)], (np.r_[T.row, d], np.r_[T.col, d])), shape=A.shape
+        ).tocsr()
+        U.sort_indices()
+        self.n = U.shape[0]
+        self.a = np.ascontiguousarray(U.data, dtype=np.float64)
+        self.ia = np.ascontiguousarray(U.indptr, dtype=self.itype)
+        self.ja = np.ascontiguousarray(U.indices, dtype=self.itype)
+        self.pt = np.zeros(64, dtype=np.int64)  # Pardiso's handle: 64 pointers
+        self.iparm = np.zeros(64, dtype=self.itype)
+        self.iparm[0] = 1  # the iparm given here, not the defaults
+        self.iparm[1] = 2  # METIS nested-dissection ordering
+        self.iparm[17] = -1  # report the factor's nonzeros (read by pipelines/factor_study.py)
+        self.iparm[34] = 1  # zero-based indices
+        one = np.zeros(1)
+        args = (self.lib, self.itype, self.pt, self.iparm)
+        weakref.finalize(self, _pardiso_release, *args, self.n)
+        _pardiso_call(*args, 12, self.n, self.a, self.ia, self.ja, 1, one, one.copy())
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """``A⁻¹ b`` for ``b`` of shape (m, k); returns shape (m, k)."""
+        k = b.shape[1]
+        bt = np.ascontiguousarray(b.T)  # column after column, as Pardiso reads them
+        xt = np.empty_like(bt)
+        # the back-solve on one thread: two were no faster at any size measured (module doc)
+        before = self.lib.MKL_Set_Num_Threads_Local(ctypes.c_int(1))
+        try:
+            _pardiso_call(
+                self.lib,
+                self.itype,
+                self.pt,
+                self.iparm,
+                33,
+                self.n,
+                self.a,
+                self.ia,
+                self.ja,
+                k,
+                bt,
+                xt,
+            )
+        finally:
+            self.lib.MKL_Set_Num_Threads_Local(ctypes.c_int(before))
+        return xt.T.copy()
 
 
 class FixedQuadratic:
@@ -101,7 +341,6 @@ class FixedQuadratic:
     made = 0
 
     def __init__(self, Q: sp.spmatrix, fixed: np.ndarray, backend: str = "auto"):
-        self.backend = resolve_backend(backend)
         Q = sp.csr_matrix(Q)
         n = Q.shape[0]
         self.n = n
@@ -112,15 +351,32 @@ class FixedQuadratic:
         rows = Q[self.free]
         self.Qff = sp.csr_matrix(rows[:, self.free])
         self.Qfb = sp.csr_matrix(rows[:, self.fixed])
+        self.backend = resolve_backend(backend, self.Qff.nnz)
         if not self.free.size:
             return
         FixedQuadratic.made += 1
         if self.backend == "igl":
             self._data = igl.min_quad_with_fixed_data()
-            ok = igl.min_quad_with_fixed_precompute(
-                sp.csc_matrix(Q), self.fixed, sp.csc_matrix((0, n)), True, self._data
-            )
+            try:
+                ok = igl.min_quad_with_fixed_precompute(
+                    sp.csc_matrix(Q), self.fixed, sp.csc_matrix((0, n)), True, self._data
+                )
+            except RuntimeError:  # libigl raises on some singular systems, returns False on others
+                ok = False
             if ok is False:
+                raise SolveError(_NOT_FACTORED)
+        elif self.backend == "pardiso":
+            try:
+                self._pardiso = _Pardiso(self.Qff)
+            except _PardisoError as exc:
+                if exc.code in (-4, -7):
+                    raise SolveError(_NOT_FACTORED) from exc
+                raise SolveError(
+                    f"{exc}; the deformation system could not be factored with "
+                    "linear_solver='pardiso': use linear_solver='cholespy' or 'igl'"
+                ) from exc
+            probe = self.solve_free(np.ones((self.free.size, 1)))
+            if not np.isfinite(probe).all():
                 raise SolveError(_NOT_FACTORED)
         else:
             import cholespy
@@ -151,6 +407,8 @@ class FixedQuadratic:
             x = np.empty_like(b)
             self._chol.solve(b, x)
             return x
+        if self.backend == "pardiso":
+            return self._pardiso.solve(b)
         B = np.zeros((self.n, b.shape[1]))
         B[self.free] = -b
         X = igl.min_quad_with_fixed_solve(

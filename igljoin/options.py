@@ -261,11 +261,15 @@ class JoinOptions:
         save, and below a few thousand vertices its set-up costs more than
         it saves (docs/limits.md). It preconditions the quasi-Newton steps,
         so it needs ``acceleration`` > 0.
-    linear_solver : {"auto", "igl", "cholespy"}
+    linear_solver : {"auto", "igl", "cholespy", "pardiso"}
         Sparse Cholesky backend of the global step: libigl's
-        ``min_quad_with_fixed`` (always available) or cholespy (the
-        ``igljoin[fast]`` extra, several times faster back-substitutions).
-        ``"auto"`` (default) uses cholespy when it is installed. Results
+        ``min_quad_with_fixed`` (always available), cholespy (the
+        ``igljoin[fast]`` extra, several times faster back-substitutions) or
+        MKL Pardiso (the ``igljoin[pardiso]`` extra, a supernodal
+        factorization several times faster on large or dense systems).
+        ``"auto"`` (default) uses Pardiso from
+        :data:`igljoin.linsolve.PARDISO_FROM_NNZ` nonzeros on (about 55k
+        guest vertices) and cholespy below, each when installed. Results
         agree to rounding.
 
     Notes
@@ -355,7 +359,7 @@ class JoinOptions:
             ("stiffness_on", ("auto", "vertex", "face")),
             ("initial_guess", ("extend", "rigid")),
             ("preconditioner", ("factored", "two-level")),
-            ("linear_solver", ("auto", "igl", "cholespy")),
+            ("linear_solver", ("auto", "igl", "cholespy", "pardiso")),
         ):
             value = getattr(self, name)
             if not isinstance(value, str) or value not in allowed:

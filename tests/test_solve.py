@@ -13,7 +13,16 @@ from igljoin.rotations import fit_rotations, fit_rotations_igl
 from igljoin.terms import LocalState, ShapeTerm, StretchTerm, Term
 
 HAVE_CHOLESPY = "cholespy" in linsolve.available_backends()
+HAVE_PARDISO = "pardiso" in linsolve.available_backends()
 needs_cholespy = pytest.mark.skipif(not HAVE_CHOLESPY, reason="cholespy (igljoin[fast]) missing")
+#: The optional backends, each skipped where its package is missing.
+OPTIONAL_BACKENDS = [
+    pytest.param("cholespy", marks=needs_cholespy),
+    pytest.param(
+        "pardiso",
+        marks=pytest.mark.skipif(not HAVE_PARDISO, reason="mkl (igljoin[pardiso]) missing"),
+    ),
+]
 
 
 @pytest.fixture(scope="module")
@@ -39,12 +48,13 @@ def _size(s) -> float:
 # -- linear-solver backends ----------------------------------------------------------------
 
 
-@needs_cholespy
-def test_backends_give_the_same_back_substitution(tube):
+@pytest.mark.parametrize("backend", OPTIONAL_BACKENDS)
+def test_backends_give_the_same_back_substitution(tube, backend):
     solver = _solver(tube)
     Q, fixed = solver.solver.Q, solver.solver.fixed
     a = linsolve.FixedQuadratic(Q, fixed, "igl")
-    b = linsolve.FixedQuadratic(Q, fixed, "cholespy")
+    b = linsolve.FixedQuadratic(Q, fixed, backend)
+    assert b.backend == backend
     rng = np.random.default_rng(0)
     B = rng.normal(size=(Q.shape[0], 3))
     bc = rng.normal(size=(len(fixed), 3))
@@ -58,12 +68,12 @@ def test_backends_give_the_same_back_substitution(tube):
     assert np.abs(a.solve_free(v) - b.solve_free(v)).max() <= 1e-8 * np.abs(a.solve_free(v)).max()
 
 
-@needs_cholespy
+@pytest.mark.parametrize("backend", OPTIONAL_BACKENDS)
 @pytest.mark.parametrize("name", ["patch", "tube"])
-def test_backends_give_the_same_join(name, request):
+def test_backends_give_the_same_join(name, backend, request):
     s = request.getfixturevalue(name)
     a = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve, linear_solver="igl")
-    b = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve, linear_solver="cholespy")
+    b = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve, linear_solver=backend)
     # 1e-8 of the guest size: the bound; the iterations are the same and
     # only the rounding of the back-substitutions differs (measured ~1e-15)
     assert a.iterations == b.iterations
@@ -74,10 +84,31 @@ def test_backend_choice():
     assert linsolve.resolve_backend("igl") == "igl"
     expected = "cholespy" if HAVE_CHOLESPY else "igl"
     assert linsolve.resolve_backend("auto") == expected
+    # "auto" by size: Pardiso from PARDISO_FROM_NNZ nonzeros on, where it is installed
+    small = linsolve.PARDISO_FROM_NNZ - 1
+    assert linsolve.resolve_backend("auto", small) == expected
+    large = "pardiso" if HAVE_PARDISO else expected
+    assert linsolve.resolve_backend("auto", linsolve.PARDISO_FROM_NNZ) == large
     with pytest.raises(igljoin.OptionsError, match="linear_solver"):
         linsolve.resolve_backend("umfpack")
     with pytest.raises(igljoin.OptionsError, match="linear_solver"):
         igljoin.JoinOptions(linear_solver="umfpack")
+
+
+@pytest.mark.parametrize("backend, extra", [("cholespy", "fast"), ("pardiso", "pardiso")])
+def test_a_missing_backend_names_its_extra(monkeypatch, backend, extra):
+    # as if the package were not installed
+    monkeypatch.setattr(linsolve, "_installed", lambda backend: backend == "igl")
+    with pytest.raises(igljoin.MissingExtraError, match=rf"pip install 'igljoin\[{extra}\]'"):
+        linsolve.FixedQuadratic(sp.eye(3), np.array([0]), backend)
+    assert linsolve.resolve_backend("auto", 10**7) == "igl"
+
+
+def test_pardiso_is_missing_without_mkl(monkeypatch):
+    monkeypatch.setattr(linsolve, "_mkl_rt_path", lambda: None)
+    assert "pardiso" not in linsolve.available_backends()
+    with pytest.raises(igljoin.MissingExtraError, match="mkl"):
+        linsolve.resolve_backend("pardiso")
 
 
 def test_backend_solves_a_small_system_exactly():
@@ -88,6 +119,16 @@ def test_backend_solves_a_small_system_exactly():
         x = f.solve(np.zeros((5, 1)), np.array([[0.0], [4.0]]))
         # exact up to rounding of a 3x3 Cholesky
         np.testing.assert_allclose(x[:, 0], [0, 1, 2, 3, 4], atol=1e-12)
+
+
+@pytest.mark.parametrize("backend", ["igl", *OPTIONAL_BACKENDS])
+def test_an_unheld_vertex_is_refused_by_every_backend(backend):
+    # vertex 2 is held by nothing (its row and column are zero): not factorable
+    Q = sp.diags([2.0, 2.0, 0.0, 2.0, 2.0]) - sp.eye(5, k=1) - sp.eye(5, k=-1)
+    Q = sp.csr_matrix(Q)
+    Q[1, 2] = Q[2, 1] = Q[2, 3] = Q[3, 2] = 0.0
+    with pytest.raises(igljoin.SolveError, match="touches the seam"):
+        linsolve.FixedQuadratic(Q, np.array([0]), backend)
 
 
 def test_changing_the_backend_refactors(patch):
