@@ -133,10 +133,10 @@ class LocalGlobalSolver:
         self.linear_solver = linear_solver
         parts = [term.quadratic() for term in terms]
         self.Q = sp.csr_matrix(sum(parts, sp.csr_matrix((n, n))))
-        if all(_plain_preconditioner(term) for term in terms):
+        if all(term.preconditioner_scale == 1.0 for term in terms):
             self.P = self.Q
         else:
-            scaled = [term.preconditioner_quadratic(q) for term, q in zip(terms, parts)]
+            scaled = [term.preconditioner_scale * q for term, q in zip(terms, parts)]
             self.P = sp.csr_matrix(sum(scaled, sp.csr_matrix((n, n))))
         self.factor = FixedQuadratic(self.P, self.fixed, linear_solver)
         self.factorizations = 1
@@ -398,12 +398,6 @@ class LocalGlobalSolver:
         result.timings = dict(clock)
         result.stats = stats
         return result
-
-
-def _plain_preconditioner(term: Term) -> bool:
-    """``term`` puts its exact ``Kᵀ W K`` into the preconditioner (so ``P`` may be ``Q``)."""
-    own = type(term).preconditioner_quadratic is not Term.preconditioner_quadratic
-    return term.preconditioner_scale == 1.0 and not own
 
 
 class _Memory:

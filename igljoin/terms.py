@@ -129,26 +129,6 @@ class Term(ABC):
         """The term's constant quadratic form ``Kᵀ W K``, shape (n, n)."""
         return sp.csr_matrix(self.K.T @ sp.diags(self.weights) @ self.K)
 
-    def preconditioner_quadratic(self, quadratic: sp.csr_matrix) -> sp.csr_matrix:
-        """The term's part of the quasi-Newton preconditioner ``P``, shape (n, n).
-
-        ``P`` is only the iteration's initial Hessian model
-        (:class:`igljoin.solve.LocalGlobalSolver`): what a term puts in it
-        changes how many iterations the join takes, never the minimum it
-        reaches. The default is ``preconditioner_scale × Kᵀ W K``; a term
-        whose ``Kᵀ W K`` is dense can give a sparser stand-in.
-
-        Parameters
-        ----------
-        quadratic : scipy.sparse.csr_matrix, shape (n, n)
-            The term's :meth:`quadratic` (made once by the solver).
-
-        Returns
-        -------
-        scipy.sparse.csr_matrix, shape (n, n)
-        """
-        return self.preconditioner_scale * quadratic
-
     def local(self, state: LocalState) -> tuple[float, np.ndarray]:
         """Local step: energy at ``state.X`` and ``Kᵀ W (K X − target)``, shape (n, 3).
 
@@ -679,8 +659,6 @@ class SmoothJoinTerm(Term):
         if mode == "band":
             self.tolerance = np.broadcast_to(np.asarray(tolerance, dtype=np.float64), len(seam))
             self._init_band(n, frames, weight, fit)
-            self._F, self._seam = F, np.asarray(seam, dtype=np.int64)
-            self._V0, self._band = V0, fit.band
             if active is not None:
                 self.weights = np.where(np.asarray(active, dtype=bool), self.weights, 0.0)
             self.compiled = bool(compiled)
@@ -739,76 +717,6 @@ class SmoothJoinTerm(Term):
         self._Ki = self.K.indices.astype(np.int64)
         self._Kx = np.ascontiguousarray(self.K.data, dtype=np.float64)
         self._tol_c = np.ascontiguousarray(self.tolerance, dtype=np.float64)
-
-    band_preconditioner = "exact"
-
-    def preconditioner_quadratic(self, quadratic: sp.csr_matrix) -> sp.csr_matrix:
-        """See :meth:`Term.preconditioner_quadratic`."""
-        c = self.preconditioner_scale
-        if self.mode != "band" or self.band_preconditioner == "exact":
-            return c * quadratic
-        n = quadratic.shape[0]
-        how = self.band_preconditioner
-        if how == "none":
-            return sp.csr_matrix((n, n))
-        if how == "diagonal":
-            return sp.diags(c * quadratic.diagonal()).tocsr()
-        if how == "lumped":
-            return sp.diags(c * np.asarray(abs(quadratic).sum(axis=1)).ravel()).tocsr()
-        if how.startswith("narrow"):
-            from .bandfit import band_fit, median_edge_near
-
-            f = float(how[6:] or 1.0)
-            seam = self._seam
-            h = median_edge_near(self._V0, self._F, seam)
-            narrow = f * BAND_EDGES * h
-            if narrow >= 0.99 * self._band:
-                return c * quadratic
-            E = unique_edges(self._F)
-            a, b = seam[0], seam[-1]
-            closed = bool(
-                np.any(((E[:, 0] == a) & (E[:, 1] == b)) | ((E[:, 0] == b) & (E[:, 1] == a)))
-            )
-            fit = band_fit(self._V0, self._F, seam, closed, narrow)
-            K = sp.csr_matrix(fit.weights * (self._band / BAND_EDGES))
-            return sp.csr_matrix(c * (K.T @ sp.diags(self.weights) @ K))
-        if how.startswith("top"):
-            k = int(how[3:])
-            K = sp.csr_matrix(self.K)
-            on_seam = np.zeros(n, dtype=bool)
-            on_seam[self._seam] = True
-            K.data[on_seam[K.indices]] = 0.0
-            K.eliminate_zeros()
-            for r in range(K.shape[0]):
-                a, b = K.indptr[r], K.indptr[r + 1]
-                if b - a > k:
-                    row = K.data[a:b]
-                    row[np.argsort(np.abs(row))[: b - a - k]] = 0.0
-            K.eliminate_zeros()
-            return sp.csr_matrix(c * (K.T @ sp.diags(self.weights) @ K))
-        E = unique_edges(self._F)
-        if how == "cross":
-            on_seam = np.zeros(n, dtype=bool)
-            on_seam[self._seam] = True
-            seam_pos = np.full(n, -1, dtype=np.int64)
-            seam_pos[self._seam] = np.arange(len(self._seam))
-            Ec = E[on_seam[E[:, 0]] ^ on_seam[E[:, 1]]]
-            Ec = np.where(on_seam[Ec[:, 0]][:, None], Ec, Ec[:, ::-1])
-            w = self.weights[seam_pos[Ec[:, 0]]] / ROWS_PER_BAND_ROW
-            D = _difference_operator(Ec, n)
-            return sp.csr_matrix(c * (D.T @ sp.diags(w) @ D))
-        # the block on the mesh's sparsity
-        A = sp.csr_matrix(
-            (np.ones(2 * len(E)), (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])), (n, n)
-        )
-        A = A + sp.identity(n, format="csr")
-        A.data[:] = 1.0
-        kept = quadratic.multiply(A).tocsr()
-        if how == "edges":
-            return c * kept
-        dropped = quadratic - kept
-        lump = np.asarray(abs(dropped).sum(axis=1)).ravel()
-        return sp.csr_matrix(c * (kept + sp.diags(lump)))
 
     def local(self, state: LocalState) -> tuple[float, np.ndarray]:
         """Energy and half gradient (see :meth:`Term.local`), compiled when available."""
