@@ -25,6 +25,7 @@ import scipy.sparse as sp
 
 from . import kernels
 from .bandfit import BAND_EDGES
+from .errors import OptionsError
 from .frames import SeamFrames, face_normals_areas, unit, vertex_face_matrix
 from .rotations import fit_rotations, fit_rotations_igl
 
@@ -36,6 +37,15 @@ ROTATION_REGULARISATION = 0.1
 #: form: a seam vertex of a regular mesh has about two to three such edges.
 ROWS_PER_BAND_ROW = 2.5
 
+#: Size guard of the smooth join's band rows: the vertex pairs they couple, i.e. the
+#: non-zeros of their block ``Kᵀ W K`` in the quadratic form and the preconditioner
+#: (about 12 bytes each per matrix, before the factor's fill). The band is a width in
+#: mesh units, so a guest much finer than the host puts ever more vertices under each
+#: row: 5.7e5 pairs at 10k guest vertices on the paper's patch host, 3.5e7 at 100k,
+#: about 3e9 (tens of GB) for a 1M-vertex tube. Change with
+#: ``igljoin.terms.MAX_BAND_COUPLINGS``.
+MAX_BAND_COUPLINGS = 200_000_000
+
 __all__ = [
     "check_order",
     "Term",
@@ -45,6 +55,8 @@ __all__ = [
     "SmoothJoinTerm",
     "unique_edges",
     "edge_stiffness",
+    "band_couplings",
+    "MAX_BAND_COUPLINGS",
 ]
 
 
@@ -707,6 +719,17 @@ class SmoothJoinTerm(Term):
         self.K = sp.csr_matrix(fit.weights * scale)
         if self.K.shape[1] != n:
             raise ValueError("the band fit is of another mesh")
+        pairs = band_couplings(self.K)
+        if pairs > MAX_BAND_COUPLINGS:
+            # couplings grow with the square of the vertices under a row (band width⁴)
+            narrower = fit.band * 0.9 * (MAX_BAND_COUPLINGS / pairs) ** 0.25
+            raise OptionsError(
+                f"the smooth join's band ({fit.band:.3g} mesh units wide) couples about "
+                f"{pairs:,.0f} pairs of guest vertices, more than the size guard of "
+                f"{MAX_BAND_COUPLINGS:,} (about {12 * pairs / 1e9:.0f} GB per matrix): the "
+                f"guest is much finer than the band; give smooth_band={narrower:.3g} or less, "
+                "or smooth_mode='robust', or raise igljoin.terms.MAX_BAND_COUPLINGS"
+            )
         self.pairs = None
         self.normal = np.ascontiguousarray(frames.normal, dtype=np.float64)
         self.outward = np.ascontiguousarray(-frames.inward, dtype=np.float64)
@@ -781,3 +804,32 @@ class SmoothJoinTerm(Term):
         u = p / np.where(plen > 0, plen, 1.0)[:, None]
         face = s[:, None] * (np.reshape(ca, (-1, 1)) * u + (sa * np.sign(z))[:, None] * n)
         return np.where(inside[:, None], p + z[:, None] * n, face)
+
+
+def band_couplings(K: sp.csr_matrix, samples: int = 64) -> float:
+    """Number of vertex pairs the rows of ``K`` couple: the non-zeros of ``Kᵀ K``.
+
+    Counted exactly for the columns of up to ``samples`` vertices evenly spread
+    over those any row uses (the union of the supports of the rows through
+    each), and scaled to all of them; exact when ``samples`` covers them all.
+    Costs one sparse product of ``samples`` columns, not the whole block.
+
+    Parameters
+    ----------
+    K : scipy.sparse.csr_matrix, shape (r, n)
+    samples : int
+
+    Returns
+    -------
+    float
+    """
+    pattern = sp.csr_matrix((np.ones(K.nnz), K.indices, K.indptr), shape=K.shape)
+    by_vertex = pattern.tocsc()
+    used = np.flatnonzero(np.diff(by_vertex.indptr))
+    if not used.size:
+        return 0.0
+    picked = used[
+        np.unique(np.linspace(0, used.size - 1, min(used.size, samples)).round()).astype(np.int64)
+    ]
+    reach = sp.csr_matrix(by_vertex[:, picked].T @ pattern)
+    return float(np.diff(reach.indptr).mean()) * used.size
