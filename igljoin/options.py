@@ -251,16 +251,14 @@ class JoinOptions:
         Initial inverse Hessian of the quasi-Newton steps: the factored
         quadratic form alone (default), or with a coarse correction that
         knows the rotation (bending) modes — the Gauss–Newton model on the
-        rigid and bending motions of clusters of about 20 vertices
-        (:class:`igljoin.twolevel.TwoLevelModel`), built at the start of
-        every solve and rebuilt at the current iterate whenever a vertex's
-        rotation has turned 0.2 rad since the last build. Same minimum; on
-        patch-like guests it needs 2.6–5.8× fewer iterations from 10,000
-        vertices on (a count that no longer grows with the mesh), on long
-        tubes about 2.7× fewer but its rebuilds cost more time than they
-        save, and below a few thousand vertices its set-up costs more than
-        it saves (docs/limits.md). It preconditions the quasi-Newton steps,
-        so it needs ``acceleration`` > 0.
+        rigid motions of clusters of about 20 vertices
+        (:class:`igljoin.twolevel.TwoLevelModel`), built and factored at the
+        start of every solve. Same minimum; on patch-like guests of 10,000
+        vertices and more it needs 2–3× fewer iterations (46 / 75 against
+        100 / 248 at 10k / 100k) and less time, on long tubes none fewer,
+        and below a few thousand vertices its set-up costs more than it
+        saves (docs/limits.md). It preconditions the quasi-Newton steps, so
+        it needs ``acceleration`` > 0.
     linear_solver : {"auto", "igl", "cholespy", "pardiso"}
         Sparse Cholesky backend of the global step: libigl's
         ``min_quad_with_fixed`` (always available), cholespy (the
