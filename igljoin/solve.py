@@ -124,6 +124,15 @@ class LocalGlobalSolver:
         The quasi-Newton preconditioner ``Σ c_t K_tᵀ W_t K_t`` with each
         term's :attr:`~igljoin.terms.Term.preconditioner_scale` ``c_t``; it
         is what :attr:`factor` factors.
+    wide : SmoothJoinTerm or None
+        The band smooth-join term whose block ``Kᵀ W K`` is kept out of the
+        matrices (its rows couple :data:`AUGMENT_FROM_COUPLINGS` vertex pairs or
+        more and Pardiso is there): :attr:`factor` is then an
+        :class:`~igljoin.linsolve.AugmentedQuadratic`, and ``Q`` and ``P``
+        are formed only when read. ``None``: both formed, ``factor`` a
+        :class:`~igljoin.linsolve.FixedQuadratic`.
+    factor : FixedQuadratic or AugmentedQuadratic
+        The factored ``P`` with the fixed rows.
     backend : str
         The linear solver used.
     factor_seconds : float

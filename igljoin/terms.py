@@ -42,7 +42,9 @@ ROWS_PER_BAND_ROW = 2.5
 #: (about 12 bytes each per matrix, before the factor's fill). The band is a width in
 #: mesh units, so a guest much finer than the host puts ever more vertices under each
 #: row: 5.7e5 pairs at 10k guest vertices on the paper's patch host, 3.5e7 at 100k,
-#: about 3e9 (tens of GB) for a 1M-vertex tube. Change with
+#: about 3e9 (tens of GB) for a 1M-vertex tube. It applies where the block is formed
+#: (:meth:`SmoothJoinTerm.quadratic`): not when the solver keeps it out of its matrices
+#: (:data:`igljoin.solve.AUGMENT_FROM_COUPLINGS`). Change with
 #: ``igljoin.terms.MAX_BAND_COUPLINGS``.
 MAX_BAND_COUPLINGS = 200_000_000
 
