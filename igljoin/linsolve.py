@@ -76,6 +76,12 @@ pypardiso's own ``spsolve`` (it hashes the matrix on every call and treats
 it as unsymmetric) back-solve 3 to 7 × slower; two MKL threads made the
 back-solve slower or no faster (4 × slower at 10k), which is why it runs
 on one.
+
+:class:`AugmentedQuadratic` solves ``S + c Kᵀ W K`` without forming the
+dense block ``Kᵀ W K`` of long rows (the band smooth join on a guest much
+finer than its band), through Pardiso's symmetric indefinite LDLᵀ of the
+augmented system; :class:`igljoin.solve.LocalGlobalSolver` picks it by
+:data:`igljoin.solve.AUGMENT_FROM_COUPLINGS`.
 """
 
 from __future__ import annotations
