@@ -76,6 +76,12 @@ pypardiso's own ``spsolve`` (it hashes the matrix on every call and treats
 it as unsymmetric) back-solve 3 to 7 × slower; two MKL threads made the
 back-solve slower or no faster (4 × slower at 10k), which is why it runs
 on one.
+
+:class:`AugmentedQuadratic` solves ``S + c Kᵀ W K`` without forming the
+dense block ``Kᵀ W K`` of long rows (the band smooth join on a guest much
+finer than its band), through Pardiso's symmetric indefinite LDLᵀ of the
+augmented system; :class:`igljoin.solve.LocalGlobalSolver` picks it by
+:data:`igljoin.solve.AUGMENT_FROM_COUPLINGS`.
 """
 
 from __future__ import annotations
@@ -96,6 +102,7 @@ from .errors import MissingExtraError, OptionsError, SolveError
 __all__ = [
     "BACKENDS",
     "PARDISO_FROM_NNZ",
+    "AugmentedQuadratic",
     "FixedQuadratic",
     "available_backends",
     "resolve_backend",
@@ -208,8 +215,12 @@ def _mkl_rt() -> tuple[ctypes.CDLL, type]:
     return lib, (np.int64 if layer == 1 else np.int32)
 
 
-def _pardiso_call(lib, itype, pt, iparm, phase, n, a, ia, ja, nrhs, b, x) -> None:
-    """One call of ``pardiso`` (real SPD matrix type 2, one factor, no message output)."""
+def _pardiso_call(lib, itype, pt, iparm, phase, n, a, ia, ja, nrhs, b, x, mtype=2) -> None:
+    """One call of ``pardiso`` (one factor, no message output).
+
+    ``mtype`` is Pardiso's matrix type: 2 real symmetric positive definite,
+    -2 real symmetric indefinite.
+    """
     ct = ctypes.c_int64 if itype is np.int64 else ctypes.c_int32
     err = ct(0)
     ptr = ctypes.c_void_p
@@ -221,7 +232,7 @@ def _pardiso_call(lib, itype, pt, iparm, phase, n, a, ia, ja, nrhs, b, x) -> Non
         arr(pt),
         ctypes.byref(ct(1)),  # maxfct
         ctypes.byref(ct(1)),  # mnum
-        ctypes.byref(ct(2)),  # mtype: real symmetric positive definite
+        ctypes.byref(ct(mtype)),
         ctypes.byref(ct(phase)),
         ctypes.byref(ct(n)),
         arr(a),
@@ -239,25 +250,40 @@ def _pardiso_call(lib, itype, pt, iparm, phase, n, a, ia, ja, nrhs, b, x) -> Non
         raise _PardisoError(phase, int(err.value))
 
 
-def _pardiso_release(lib, itype, pt, iparm, n) -> None:
+def _pardiso_release(lib, itype, pt, iparm, n, mtype=2) -> None:
     """Free Pardiso's memory for ``pt`` (phase -1)."""
     try:
-        _pardiso_call(lib, itype, pt, iparm, -1, n, None, None, None, 1, None, None)
+        _pardiso_call(lib, itype, pt, iparm, -1, n, None, None, None, 1, None, None, mtype)
     except _PardisoError:  # nothing left to free
         pass
 
 
 class _Pardiso:
-    """Supernodal Cholesky of an SPD matrix with MKL Pardiso (METIS ordering).
+    """Supernodal factorization of a symmetric matrix with MKL Pardiso (METIS ordering).
 
     Parameters
     ----------
     A : sparse matrix, shape (m, m)
-        Symmetric positive definite; only its upper triangle is read.
+        Symmetric; only its upper triangle is read.
+    indefinite : bool
+        ``False``: positive definite, a Cholesky factorization (Pardiso's
+        ``mtype=2``). ``True``: indefinite, an LDLᵀ factorization with
+        Bunch–Kaufman pivoting inside the supernodes (``mtype=-2``); a pivot
+        smaller than 1e-8 of the largest is perturbed to that size
+        (``iparm[9]=8``) and each back-solve is then refined by up to two
+        steps of iterative refinement (``iparm[7]=0``, Pardiso's default).
+
+    Attributes
+    ----------
+    perturbed : int
+        Pivots Pardiso perturbed (``iparm[13]``; 0 for a quasi-definite matrix
+        ``[[S, Kᵀ], [K, −D]]`` with ``S`` and ``D`` positive definite, which
+        has an LDLᵀ factorization in any order).
     """
 
-    def __init__(self, A: sp.spmatrix):
+    def __init__(self, A: sp.spmatrix, indefinite: bool = False):
         self.lib, self.itype = _mkl_rt()
+        self.mtype = -2 if indefinite else 2
         T = sp.triu(sp.coo_matrix(A), format="coo")
         d = np.arange(A.shape[0])
         # Pardiso needs every diagonal entry stored, zero or not (a missing one is an error)
@@ -275,10 +301,14 @@ class _Pardiso:
         self.iparm[1] = 2  # METIS nested-dissection ordering
         self.iparm[17] = -1  # report the factor's nonzeros (read by pipelines/factor_study.py)
         self.iparm[34] = 1  # zero-based indices
+        if indefinite:
+            self.iparm[7] = 0  # up to two refinement steps, where a pivot was perturbed
+            self.iparm[9] = 8  # perturb pivots below 1e-8 (Pardiso's default for mtype -2)
         one = np.zeros(1)
         args = (self.lib, self.itype, self.pt, self.iparm)
-        weakref.finalize(self, _pardiso_release, *args, self.n)
-        _pardiso_call(*args, 12, self.n, self.a, self.ia, self.ja, 1, one, one.copy())
+        weakref.finalize(self, _pardiso_release, *args, self.n, self.mtype)
+        _pardiso_call(*args, 12, self.n, self.a, self.ia, self.ja, 1, one, one.copy(), self.mtype)
+        self.perturbed = int(self.iparm[13])
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """``A⁻¹ b`` for ``b`` of shape (m, k); returns shape (m, k)."""
@@ -301,6 +331,7 @@ class _Pardiso:
                 k,
                 bt,
                 xt,
+                self.mtype,
             )
         finally:
             self.lib.MKL_Set_Num_Threads_Local(ctypes.c_int(before))
@@ -439,4 +470,124 @@ class FixedQuadratic:
             out = igl.min_quad_with_fixed_solve(self._data, -B, bc, np.zeros((0, k)))
             return np.asarray(out)
         X[self.free] = self.solve_free(B[self.free] - self.Qfb @ bc)
+        return X
+
+
+class AugmentedQuadratic:
+    """A factored ``Q = S + c Kᵀ W K`` with fixed rows, without forming ``Kᵀ W K``.
+
+    When the rows of ``K`` are long (each couples many vertices), ``Kᵀ W K``
+    is a dense block of ``Q``; the augmented system
+
+    ``[[S_ff, K_fᵀ], [K_f, −(c W)⁻¹]] [x; y] = [b; 0]``
+
+    has one extra unknown ``y = c W K_f x`` per row of ``K`` and no dense
+    block, and eliminating ``y`` gives ``(S_ff + c K_fᵀ W K_f) x = b``: the
+    same ``x``. It is symmetric indefinite (quasi-definite when ``S_ff`` is
+    positive definite) and factored by MKL Pardiso's LDLᵀ (``mtype=-2``).
+    Rows of zero weight contribute nothing and are left out.
+
+    The same interface as :class:`FixedQuadratic` (``solve_free``,
+    ``solve``, ``free``, ``fixed``, ``backend``); ``Qff`` and ``Qfb`` are
+    not formed (``matvec`` applies ``Q_ff``).
+
+    Parameters
+    ----------
+    S : sparse matrix, shape (n, n)
+        The rest of ``Q``, positive definite on the free rows.
+    K : sparse matrix, shape (r, n)
+    weights : ndarray, shape (r,)
+        ``W``'s diagonal, non-negative.
+    c : float
+        Positive scale of ``Kᵀ W K`` in ``Q``.
+    fixed : ndarray of int64, shape (b,)
+
+    Raises
+    ------
+    SolveError
+        ``Q_ff`` is singular (a part of the guest not held by any term).
+    """
+
+    #: Largest relative residual ``‖Q_ff x − b‖ / ‖b‖`` of the probe solve made at
+    #: construction; above it the factorization is taken as failed (a singular
+    #: ``Q_ff`` whose zero pivots Pardiso perturbed). Measured: 1e-15 to 1e-13.
+    PROBE_RESIDUAL = 1e-8
+
+    def __init__(
+        self, S: sp.spmatrix, K: sp.spmatrix, weights: np.ndarray, c: float, fixed: np.ndarray
+    ):
+        S = sp.csr_matrix(S)
+        n = S.shape[0]
+        self.n = n
+        self.fixed = np.asarray(fixed, dtype=np.int64)
+        mask = np.ones(n, dtype=bool)
+        mask[self.fixed] = False
+        self.free = np.flatnonzero(mask)
+        self.backend = "pardiso"
+        rows = S[self.free]
+        self.Sff = sp.csr_matrix(rows[:, self.free])
+        self.Sfb = sp.csr_matrix(rows[:, self.fixed])
+        weights = np.asarray(weights, dtype=np.float64)
+        keep = np.flatnonzero(weights > 0.0)
+        Kc = sp.csc_matrix(sp.csr_matrix(K)[keep])
+        self.Kf = sp.csr_matrix(Kc[:, self.free])
+        self.Kb = sp.csr_matrix(Kc[:, self.fixed])
+        self.Kft = sp.csr_matrix(self.Kf.T)
+        self.cw = float(c) * weights[keep]
+        if not self.free.size:
+            return
+        FixedQuadratic.made += 1
+        A = sp.bmat([[self.Sff, self.Kft], [self.Kf, sp.diags(-1.0 / self.cw)]], format="csr")
+        try:
+            self._pardiso = _Pardiso(A, indefinite=True)
+        except _PardisoError as exc:
+            raise SolveError(
+                f"{exc}; the deformation system could not be factored as an augmented "
+                "system: use linear_solver='cholespy' or 'igl'"
+            ) from exc
+        probe = np.ones((self.free.size, 1))
+        x = self.solve_free(probe)
+        if not np.isfinite(x).all() or self.residual(x, probe) > self.PROBE_RESIDUAL:
+            raise SolveError(_NOT_FACTORED)
+
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        """``Q_ff x`` for ``x`` of shape (n_free, k), without ``Q_ff``."""
+        return self.Sff @ x + self.Kft @ (self.cw[:, None] * (self.Kf @ x))
+
+    def residual(self, x: np.ndarray, b: np.ndarray) -> float:
+        """Relative residual ``‖Q_ff x − b‖ / ‖b‖`` (Frobenius) of a solve of ``b`` (n_free, k)."""
+        return float(np.linalg.norm(self.matvec(x) - b) / max(np.linalg.norm(b), 1e-300))
+
+    def solve_free(self, b: np.ndarray) -> np.ndarray:
+        """``Q_ff⁻¹ b`` for ``b`` of shape (n_free, k); returns shape (n_free, k)."""
+        b = np.ascontiguousarray(b, dtype=np.float64)
+        if not self.free.size:
+            return np.zeros_like(b)
+        rhs = np.zeros((self.free.size + self.cw.size, b.shape[1]))
+        rhs[: self.free.size] = b
+        return np.ascontiguousarray(self._pardiso.solve(rhs)[: self.free.size])
+
+    def solve(self, B: np.ndarray, bc: np.ndarray) -> np.ndarray:
+        """Minimiser of ``½ xᵀ Q x − xᵀ B`` with ``x[fixed] = bc``.
+
+        The fixed rows enter the right-hand side as
+        ``S_fb bc + c K_fᵀ W (K_b bc)``, products with the factors only.
+
+        Parameters
+        ----------
+        B : ndarray, shape (n, k)
+        bc : ndarray, shape (b, k)
+
+        Returns
+        -------
+        ndarray, shape (n, k)
+        """
+        B = np.asarray(B, dtype=np.float64)
+        bc = np.asarray(bc, dtype=np.float64)
+        X = np.empty((self.n, B.shape[1]))
+        X[self.fixed] = bc
+        if not self.free.size:
+            return X
+        coupled = self.Sfb @ bc + self.Kft @ (self.cw[:, None] * (self.Kb @ bc))
+        X[self.free] = self.solve_free(B[self.free] - coupled)
         return X

@@ -42,7 +42,9 @@ ROWS_PER_BAND_ROW = 2.5
 #: (about 12 bytes each per matrix, before the factor's fill). The band is a width in
 #: mesh units, so a guest much finer than the host puts ever more vertices under each
 #: row: 5.7e5 pairs at 10k guest vertices on the paper's patch host, 3.5e7 at 100k,
-#: about 3e9 (tens of GB) for a 1M-vertex tube. Change with
+#: about 3e9 (tens of GB) for a 1M-vertex tube. It applies where the block is formed
+#: (:meth:`SmoothJoinTerm.quadratic`): not when the solver keeps it out of its matrices
+#: (:data:`igljoin.solve.AUGMENT_FROM_COUPLINGS`). Change with
 #: ``igljoin.terms.MAX_BAND_COUPLINGS``.
 MAX_BAND_COUPLINGS = 200_000_000
 
@@ -719,17 +721,9 @@ class SmoothJoinTerm(Term):
         self.K = sp.csr_matrix(fit.weights * scale)
         if self.K.shape[1] != n:
             raise ValueError("the band fit is of another mesh")
-        pairs = band_couplings(self.K)
-        if pairs > MAX_BAND_COUPLINGS:
-            # couplings grow with the square of the vertices under a row (band width⁴)
-            narrower = fit.band * 0.9 * (MAX_BAND_COUPLINGS / pairs) ** 0.25
-            raise OptionsError(
-                f"the smooth join's band ({fit.band:.3g} mesh units wide) couples about "
-                f"{pairs:,.0f} pairs of guest vertices, more than the size guard of "
-                f"{MAX_BAND_COUPLINGS:,} (about {12 * pairs / 1e9:.0f} GB per matrix): the "
-                f"guest is much finer than the band; give smooth_band={narrower:.3g} or less, "
-                "or smooth_mode='robust', or raise igljoin.terms.MAX_BAND_COUPLINGS"
-            )
+        self.band = float(fit.band)
+        #: vertex pairs the rows couple (the non-zeros of their block ``Kᵀ W K``)
+        self.couplings = band_couplings(self.K)
         self.pairs = None
         self.normal = np.ascontiguousarray(frames.normal, dtype=np.float64)
         self.outward = np.ascontiguousarray(-frames.inward, dtype=np.float64)
@@ -740,6 +734,32 @@ class SmoothJoinTerm(Term):
         self._Ki = self.K.indices.astype(np.int64)
         self._Kx = np.ascontiguousarray(self.K.data, dtype=np.float64)
         self._tol_c = np.ascontiguousarray(self.tolerance, dtype=np.float64)
+
+    def check_size(self) -> None:
+        """Refuse to form a band block larger than :data:`MAX_BAND_COUPLINGS`.
+
+        Raises
+        ------
+        OptionsError
+            With a ``smooth_band`` that fits.
+        """
+        if self.mode != "band" or self.couplings <= MAX_BAND_COUPLINGS:
+            return
+        pairs = self.couplings
+        # couplings grow with the square of the vertices under a row (band width⁴)
+        narrower = self.band * 0.9 * (MAX_BAND_COUPLINGS / pairs) ** 0.25
+        raise OptionsError(
+            f"the smooth join's band ({self.band:.3g} mesh units wide) couples about "
+            f"{pairs:,.0f} pairs of guest vertices, more than the size guard of "
+            f"{MAX_BAND_COUPLINGS:,} (about {12 * pairs / 1e9:.0f} GB per matrix): the "
+            f"guest is much finer than the band; give smooth_band={narrower:.3g} or less, "
+            "or smooth_mode='robust', or raise igljoin.terms.MAX_BAND_COUPLINGS"
+        )
+
+    def quadratic(self) -> sp.csr_matrix:
+        """``Kᵀ W K``, shape (n, n); band mode refuses one too large (:meth:`check_size`)."""
+        self.check_size()
+        return super().quadratic()
 
     def local(self, state: LocalState) -> tuple[float, np.ndarray]:
         """Energy and half gradient (see :meth:`Term.local`), compiled when available."""
