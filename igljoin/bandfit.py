@@ -29,6 +29,7 @@ import numba as nb
 import numpy as np
 import scipy.sparse as sp
 
+from .errors import OptionsError
 from .frames import SeamFrames, face_normals_areas, unit, vertex_face_matrix
 from .polyline import arc_lengths
 
@@ -45,6 +46,13 @@ __all__ = [
 #: enough that the fit sees two to three rings of ordinary triangles beyond any sliver
 #: row at the curve, narrow enough to stay local on the paper's tubes.
 BAND_EDGES = 3.0
+
+#: Size guard of one band fit: curve vertices × the most mesh vertices within the band
+#: of one of them. The fit's work arrays hold about 200 bytes per entry, so 4e7 entries
+#: are about 8 GB; a guest far finer than the band (a 1M-vertex tube under the paper's
+#: host) reaches it before any matrix is built. Change with
+#: ``igljoin.bandfit.MAX_FIT_ENTRIES``.
+MAX_FIT_ENTRIES = 40_000_000
 
 #: A band vertex whose normal turns more than about 70° from the curve vertex's
 #: normal is on another sheet of the surface (the far side of a thin wall or wing).
@@ -296,9 +304,19 @@ def band_fit(
     near = _near_vertices(V, F, curve, reach)
     from scipy.spatial import cKDTree  # here: scipy.spatial costs start-up time
 
-    hits = cKDTree(V[near]).query_ball_point(A, band)
-    counts = np.fromiter(map(len, hits), dtype=np.int64, count=k)
+    tree = cKDTree(V[near])
+    counts = np.asarray(tree.query_ball_point(A, band, return_length=True), dtype=np.int64)
     M = max(int(counts.max()) if k else 0, 1)
+    if k * M > MAX_FIT_ENTRIES:
+        narrower = band * 0.9 * (MAX_FIT_ENTRIES / (k * M)) ** 0.5
+        raise OptionsError(
+            f"a band fit {band:.3g} mesh units wide reaches up to {M:,} mesh vertices around "
+            f"each of {k:,} curve vertices ({k * M:,} entries, about {200e-9 * k * M:.0f} GB "
+            f"of work arrays), more than the size guard of {MAX_FIT_ENTRIES:,}: the mesh is "
+            f"much finer than the band; give smooth_band={narrower:.3g} or less, or raise "
+            "igljoin.bandfit.MAX_FIT_ENTRIES"
+        )
+    hits = tree.query_ball_point(A, band)
     idx = np.zeros((k, M), dtype=np.int64)
     valid = np.arange(M)[None, :] < counts[:, None]
     total = int(counts.sum())

@@ -3,6 +3,7 @@
 import pytest
 
 import igljoin
+import igljoin.bandfit
 import igljoin.terms
 from igljoin import phantoms
 from igljoin.terms import SmoothJoinTerm, band_couplings
@@ -34,3 +35,10 @@ def test_a_band_too_large_is_refused_before_its_matrices(band_rows, monkeypatch)
     # the way out the message names works under the same guard
     res = igljoin.join(s.host, s.guest, s.host_curve, s.guest_curve, smooth_mode="robust")
     assert res.converged
+
+
+def test_a_band_fit_too_large_is_refused_before_its_arrays(band_rows, monkeypatch):
+    s, _ = band_rows
+    monkeypatch.setattr(igljoin.bandfit, "MAX_FIT_ENTRIES", 100)
+    with pytest.raises(igljoin.OptionsError, match="smooth_band=.*MAX_FIT_ENTRIES"):
+        igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
