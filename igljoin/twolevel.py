@@ -126,24 +126,35 @@ def rigid_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
     -------
     scipy.sparse.csr_matrix, shape (3 m, 6 a)
     """
-    m = len(X)
-    a = int(labels.max()) + 1
-    count = np.bincount(labels, minlength=a).astype(np.float64)
-    centre = np.stack([np.bincount(labels, X[:, d], minlength=a) for d in range(3)], 1)
-    r = X - (centre / count[:, None])[labels]
-    radius = np.sqrt(np.bincount(labels, np.einsum("ij,ij->i", r, r), minlength=a) / count)
+    a, _, r, radius = _about_centroids(X, labels)
     r = r / np.maximum(radius[labels], 1e-300)[:, None]
-    blocks = np.zeros((m, 3, 6))
+    blocks = np.zeros((len(X), 3, 6))
     blocks[:, 0, 0] = blocks[:, 1, 1] = blocks[:, 2, 2] = 1.0
     # θ × r = −[r]× θ
     blocks[:, 0, 4], blocks[:, 0, 5] = r[:, 2], -r[:, 1]
     blocks[:, 1, 3], blocks[:, 1, 5] = -r[:, 2], r[:, 0]
     blocks[:, 2, 3], blocks[:, 2, 4] = r[:, 1], -r[:, 0]
+    return _cluster_columns(blocks, labels, a)
+
+
+def _about_centroids(X: np.ndarray, labels: np.ndarray):
+    """Clusters ``a``, their sizes (a,), offsets from their centroids (m, 3), radii (a,)."""
+    a = int(labels.max()) + 1
+    count = np.bincount(labels, minlength=a).astype(np.float64)
+    centre = np.stack([np.bincount(labels, X[:, d], minlength=a) for d in range(3)], 1)
+    r = X - (centre / count[:, None])[labels]
+    radius = np.sqrt(np.bincount(labels, np.einsum("ij,ij->i", r, r), minlength=a) / count)
+    return a, count, r, radius
+
+
+def _cluster_columns(blocks: np.ndarray, labels: np.ndarray, a: int) -> sp.csr_matrix:
+    """Per-vertex blocks (m, 3, w) placed in their cluster's ``w`` columns: (3 m, w a)."""
+    m, _, w = blocks.shape
     rows = np.broadcast_to(
         3 * np.arange(m)[:, None, None] + np.arange(3)[None, :, None], blocks.shape
     )
-    cols = np.broadcast_to(6 * labels[:, None, None] + np.arange(6)[None, None, :], blocks.shape)
-    return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * m, 6 * a))
+    cols = np.broadcast_to(w * labels[:, None, None] + np.arange(w)[None, None, :], blocks.shape)
+    return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * m, w * a))
 
 
 def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
@@ -171,15 +182,10 @@ def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
         Columns ``3 j .. 3 j + 2``: cluster ``j``'s ``n u²``, ``n u v``,
         ``n v²``; vertex-major rows.
     """
-    m = len(X)
-    a = int(labels.max()) + 1
-    count = np.bincount(labels, minlength=a).astype(np.float64)
-    centre = np.stack([np.bincount(labels, X[:, d], minlength=a) for d in range(3)], 1)
-    r = X - (centre / count[:, None])[labels]
+    a, count, r, radius = _about_centroids(X, labels)
     cov = np.zeros((a, 3, 3))
     np.add.at(cov, labels, r[:, :, None] * r[:, None, :])
     _, vec = np.linalg.eigh(cov)  # ascending: vec[:, :, 0] the normal
-    radius = np.sqrt(np.bincount(labels, np.einsum("ij,ij->i", r, r), minlength=a) / count)
     r = r / np.maximum(radius[labels], 1e-300)[:, None]
     frame = vec[labels]
     u = np.einsum("ij,ij->i", r, frame[:, :, 2])
@@ -191,11 +197,7 @@ def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
         / count[:, None]
     )[labels]
     blocks = normal[:, :, None] * shapes[:, None, :]  # (m, 3, 3): coordinate, shape
-    rows = np.broadcast_to(
-        3 * np.arange(m)[:, None, None] + np.arange(3)[None, :, None], blocks.shape
-    )
-    cols = np.broadcast_to(3 * labels[:, None, None] + np.arange(3)[None, None, :], blocks.shape)
-    return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * m, 3 * a))
+    return _cluster_columns(blocks, labels, a)
 
 
 class TwoLevelModel:
