@@ -338,7 +338,47 @@ class _Pardiso:
         return xt.T.copy()
 
 
-class FixedQuadratic:
+class _FixedRows:
+    """What the factored forms share: the free / fixed split and the solve with fixed rows.
+
+    A subclass sets :attr:`free` and :attr:`fixed` through :meth:`_split` and
+    provides ``solve_free`` and ``coupled``.
+    """
+
+    def _split(self, M: sp.spmatrix, fixed: np.ndarray):
+        """Set ``n``, ``fixed``, ``free``; return ``M``'s free–free and free–fixed blocks."""
+        n = M.shape[0]
+        self.n = n
+        self.fixed = np.asarray(fixed, dtype=np.int64)
+        mask = np.ones(n, dtype=bool)
+        mask[self.fixed] = False
+        self.free = np.flatnonzero(mask)
+        rows = M[self.free]
+        return sp.csr_matrix(rows[:, self.free]), sp.csr_matrix(rows[:, self.fixed])
+
+    def solve(self, B: np.ndarray, bc: np.ndarray) -> np.ndarray:
+        """Minimiser of ``½ xᵀ Q x − xᵀ B`` with ``x[fixed] = bc``.
+
+        Parameters
+        ----------
+        B : ndarray, shape (n, k)
+        bc : ndarray, shape (b, k)
+
+        Returns
+        -------
+        ndarray, shape (n, k)
+        """
+        B = np.asarray(B, dtype=np.float64)
+        bc = np.asarray(bc, dtype=np.float64)
+        X = np.empty((self.n, B.shape[1]))
+        X[self.fixed] = bc
+        if not self.free.size:
+            return X
+        X[self.free] = self.solve_free(B[self.free] - self.coupled(bc))
+        return X
+
+
+class FixedQuadratic(_FixedRows):
     """A factored ``Q`` (n × n, symmetric positive definite on the free rows) with fixed rows.
 
     Parameters
@@ -374,14 +414,7 @@ class FixedQuadratic:
     def __init__(self, Q: sp.spmatrix, fixed: np.ndarray, backend: str = "auto"):
         Q = sp.csr_matrix(Q)
         n = Q.shape[0]
-        self.n = n
-        self.fixed = np.asarray(fixed, dtype=np.int64)
-        mask = np.ones(n, dtype=bool)
-        mask[self.fixed] = False
-        self.free = np.flatnonzero(mask)
-        rows = Q[self.free]
-        self.Qff = sp.csr_matrix(rows[:, self.free])
-        self.Qfb = sp.csr_matrix(rows[:, self.fixed])
+        self.Qff, self.Qfb = self._split(Q, fixed)
         self.backend = resolve_backend(backend, self.Qff.nnz)
         if not self.free.size:
             return
@@ -447,33 +480,22 @@ class FixedQuadratic:
         )
         return np.asarray(X)[self.free]
 
+    def coupled(self, bc: np.ndarray) -> np.ndarray:
+        """The fixed rows' part of the free rows' right-hand side, ``Q_fb bc`` (n_free, k)."""
+        return self.Qfb @ bc
+
     def solve(self, B: np.ndarray, bc: np.ndarray) -> np.ndarray:
-        """Minimiser of ``½ xᵀ Q x − xᵀ B`` with ``x[fixed] = bc``.
-
-        Parameters
-        ----------
-        B : ndarray, shape (n, k)
-        bc : ndarray, shape (b, k)
-
-        Returns
-        -------
-        ndarray, shape (n, k)
-        """
-        B = np.asarray(B, dtype=np.float64)
-        bc = np.asarray(bc, dtype=np.float64)
-        k = B.shape[1]
-        X = np.empty((self.n, k))
-        X[self.fixed] = bc
-        if not self.free.size:
-            return X
-        if self.backend == "igl":
-            out = igl.min_quad_with_fixed_solve(self._data, -B, bc, np.zeros((0, k)))
-            return np.asarray(out)
-        X[self.free] = self.solve_free(B[self.free] - self.Qfb @ bc)
-        return X
+        """Minimiser of ``½ xᵀ Q x − xᵀ B`` with ``x[fixed] = bc`` (see :class:`_FixedRows`)."""
+        if self.backend == "igl" and self.free.size:
+            B = np.asarray(B, dtype=np.float64)
+            bc = np.asarray(bc, dtype=np.float64)
+            return np.asarray(
+                igl.min_quad_with_fixed_solve(self._data, -B, bc, np.zeros((0, B.shape[1])))
+            )
+        return super().solve(B, bc)
 
 
-class AugmentedQuadratic:
+class AugmentedQuadratic(_FixedRows):
     """A factored ``Q = S + c Kᵀ W K`` with fixed rows, without forming ``Kᵀ W K``.
 
     When the rows of ``K`` are long (each couples many vertices), ``Kᵀ W K``
@@ -516,17 +538,8 @@ class AugmentedQuadratic:
     def __init__(
         self, S: sp.spmatrix, K: sp.spmatrix, weights: np.ndarray, c: float, fixed: np.ndarray
     ):
-        S = sp.csr_matrix(S)
-        n = S.shape[0]
-        self.n = n
-        self.fixed = np.asarray(fixed, dtype=np.int64)
-        mask = np.ones(n, dtype=bool)
-        mask[self.fixed] = False
-        self.free = np.flatnonzero(mask)
+        self.Sff, self.Sfb = self._split(sp.csr_matrix(S), fixed)
         self.backend = "pardiso"
-        rows = S[self.free]
-        self.Sff = sp.csr_matrix(rows[:, self.free])
-        self.Sfb = sp.csr_matrix(rows[:, self.fixed])
         weights = np.asarray(weights, dtype=np.float64)
         keep = np.flatnonzero(weights > 0.0)
         Kc = sp.csc_matrix(sp.csr_matrix(K)[keep])
@@ -567,27 +580,9 @@ class AugmentedQuadratic:
         rhs[: self.free.size] = b
         return np.ascontiguousarray(self._pardiso.solve(rhs)[: self.free.size])
 
-    def solve(self, B: np.ndarray, bc: np.ndarray) -> np.ndarray:
-        """Minimiser of ``½ xᵀ Q x − xᵀ B`` with ``x[fixed] = bc``.
+    def coupled(self, bc: np.ndarray) -> np.ndarray:
+        """The fixed rows' part of the right-hand side, ``S_fb bc + c K_fᵀ W (K_b bc)``.
 
-        The fixed rows enter the right-hand side as
-        ``S_fb bc + c K_fᵀ W (K_b bc)``, products with the factors only.
-
-        Parameters
-        ----------
-        B : ndarray, shape (n, k)
-        bc : ndarray, shape (b, k)
-
-        Returns
-        -------
-        ndarray, shape (n, k)
+        Products with the factors only (shape (n_free, k)).
         """
-        B = np.asarray(B, dtype=np.float64)
-        bc = np.asarray(bc, dtype=np.float64)
-        X = np.empty((self.n, B.shape[1]))
-        X[self.fixed] = bc
-        if not self.free.size:
-            return X
-        coupled = self.Sfb @ bc + self.Kft @ (self.cw[:, None] * (self.Kb @ bc))
-        X[self.free] = self.solve_free(B[self.free] - coupled)
-        return X
+        return self.Sfb @ bc + self.Kft @ (self.cw[:, None] * (self.Kb @ bc))
