@@ -128,7 +128,15 @@ def _installed(backend: str) -> bool:
         return True
     if backend == "cholespy":
         return importlib.util.find_spec("cholespy") is not None
-    return _mkl_rt_path() is not None  # looked for only when needed: it takes ~40 ms
+    # looked for only when needed (~40 ms); a library that is found but does not load (or
+    # is not MKL's) counts as missing
+    if _mkl_rt_path() is None:
+        return False
+    try:
+        _mkl_rt()
+    except (OSError, AttributeError):
+        return False
+    return True
 
 
 def available_backends() -> list[str]:
@@ -202,7 +210,7 @@ def _mkl_rt_path() -> str | None:
     except importlib.metadata.PackageNotFoundError:
         files = []
     for f in files:
-        if f.name.startswith(("libmkl_rt.so", "libmkl_rt.", "mkl_rt.")):
+        if f.name.startswith(("libmkl_rt.", "mkl_rt.")):
             return str(f.locate())
     return ctypes.util.find_library("mkl_rt")
 
@@ -335,7 +343,7 @@ class _Pardiso:
             )
         finally:
             self.lib.MKL_Set_Num_Threads_Local(ctypes.c_int(before))
-        return xt.T.copy()
+        return xt.T  # a view; the callers copy what they keep
 
 
 class _FixedRows:
@@ -439,9 +447,6 @@ class FixedQuadratic(_FixedRows):
                     f"{exc}; the deformation system could not be factored with "
                     "linear_solver='pardiso': use linear_solver='cholespy' or 'igl'"
                 ) from exc
-            probe = self.solve_free(np.ones((self.free.size, 1)))
-            if not np.isfinite(probe).all():
-                raise SolveError(_NOT_FACTORED)
         else:
             import cholespy
 
@@ -457,6 +462,7 @@ class FixedQuadratic(_FixedRows):
                 )
             except (RuntimeError, ValueError) as exc:
                 raise SolveError(_NOT_FACTORED) from exc
+        if self.backend != "igl":
             # a matrix that is only semidefinite can factor without an error: probe it
             probe = self.solve_free(np.ones((self.free.size, 1)))
             if not np.isfinite(probe).all():
@@ -472,7 +478,7 @@ class FixedQuadratic(_FixedRows):
             self._chol.solve(b, x)
             return x
         if self.backend == "pardiso":
-            return self._pardiso.solve(b)
+            return np.ascontiguousarray(self._pardiso.solve(b))
         B = np.zeros((self.n, b.shape[1]))
         B[self.free] = -b
         X = igl.min_quad_with_fixed_solve(
@@ -561,7 +567,10 @@ class AugmentedQuadratic(_FixedRows):
         probe = np.ones((self.free.size, 1))
         x = self.solve_free(probe)
         if not np.isfinite(x).all() or self.residual(x, probe) > self.PROBE_RESIDUAL:
-            raise SolveError(_NOT_FACTORED)
+            raise SolveError(
+                f"{_NOT_FACTORED} ({self._pardiso.perturbed} pivots of the augmented system "
+                "were perturbed)"
+            )
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
         """``Q_ff x`` for ``x`` of shape (n_free, k), without ``Q_ff``."""

@@ -349,7 +349,7 @@ class LocalGlobalSolver:
         IterationResult
         """
         start = time.perf_counter()
-        clock = {"local": 0.0, "solve": 0.0}
+        clock = {"local": 0.0, "solve": 0.0, "model": 0.0}
         stats = {"local_steps": 0, "back_solves": 0, "rejected": 0, "restarts": 0}
         free, fixed = self.free, self.fixed
         # (b, 3) rows for the compiled scatter (broadcast as ``X[fixed] = bc`` would)
@@ -401,7 +401,7 @@ class LocalGlobalSolver:
                 t0 = time.perf_counter()
                 if model.refresh(state, it):
                     memory.clear()
-                clock["model"] = clock.get("model", 0.0) + time.perf_counter() - t0
+                clock["model"] += time.perf_counter() - t0
             if acceleration > 0 and memory.size:
                 d = -memory.apply(g, back_solve)
                 gd = kernels.dot(g, d)

@@ -169,6 +169,11 @@ class Term(ABC):
         G += g
         return e
 
+    def _local_from_into(self, state: LocalState) -> tuple[float, np.ndarray]:
+        """:meth:`local` of a term that adds in place: ``local_into`` on a zero (n, 3) array."""
+        G = np.zeros((state.X.shape[0], 3))
+        return self.local_into(state, G), G
+
 
 def check_order(terms: list[Term]) -> None:
     """Refuse a term list in which a term reads rotations a later term sets.
@@ -464,8 +469,7 @@ class ShapeTerm(Term):
             r = LX - self.delta
             return w * float(np.einsum("ij,ij->", r, r)), w * (self.Lt @ r)
         if self.compiled and state.rotations is None:
-            G = np.zeros((self.n, 3))
-            return self._local_compiled(state, G), G
+            return self._local_from_into(state)
         LX, _ = self._fit(state)
         Rd, a0, a1 = self._rotated(state)
         dT = _edge_vectors(state, self.E, self.D, self.compiled).T
@@ -595,8 +599,7 @@ class StretchTerm(Term):
     def local(self, state: LocalState) -> tuple[float, np.ndarray]:
         """Energy and half gradient ``Dᵀ diag(k) (D X − s)`` (see :meth:`Term.local`)."""
         if self.compiled:
-            G = np.zeros((state.X.shape[0], 3))
-            return self.local_into(state, G), G
+            return self._local_from_into(state)
         d = self.applied(state)
         length = np.sqrt(np.einsum("ij,ij->i", d, d))
         if not (length > 1e-12 * np.maximum(self.rest_length, 1e-300)).all():
@@ -753,7 +756,8 @@ class SmoothJoinTerm(Term):
             f"{pairs:,.0f} pairs of guest vertices, more than the size guard of "
             f"{MAX_BAND_COUPLINGS:,} (about {12 * pairs / 1e9:.0f} GB per matrix): the "
             f"guest is much finer than the band; give smooth_band={narrower:.3g} or less, "
-            "or smooth_mode='robust', or raise igljoin.terms.MAX_BAND_COUPLINGS"
+            "or smooth_mode='robust', or install igljoin[pardiso] (the join then never forms "
+            "this block), or raise igljoin.terms.MAX_BAND_COUPLINGS"
         )
 
     def quadratic(self) -> sp.csr_matrix:
@@ -765,8 +769,7 @@ class SmoothJoinTerm(Term):
         """Energy and half gradient (see :meth:`Term.local`), compiled when available."""
         if not self.compiled:
             return super().local(state)
-        G = np.zeros((state.X.shape[0], 3))
-        return self.local_into(state, G), G
+        return self._local_from_into(state)
 
     def local_into(self, state: LocalState, G: np.ndarray) -> float:
         """:meth:`local` adding into ``G`` (see :meth:`Term.local_into`)."""
@@ -775,7 +778,7 @@ class SmoothJoinTerm(Term):
         if self.mode == "band":
             e = kernels.band_local(
                 state.X, self._Kp, self._Ki, self._Kx, self.normal, self.outward,
-                np.ascontiguousarray(self.weights, dtype=np.float64), self._tol_c, G,
+                self.weights, self._tol_c, G,
             )  # fmt: skip
         else:
             e = kernels.smooth_local(

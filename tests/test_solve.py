@@ -101,7 +101,7 @@ def test_a_missing_backend_names_its_extra(monkeypatch, backend, extra):
     monkeypatch.setattr(linsolve, "_installed", lambda backend: backend == "igl")
     with pytest.raises(igljoin.MissingExtraError, match=rf"pip install 'igljoin\[{extra}\]'"):
         linsolve.FixedQuadratic(sp.eye(3), np.array([0]), backend)
-    assert linsolve.resolve_backend("auto", 10**7) == "igl"
+    assert linsolve.resolve_backend("auto", linsolve.PARDISO_FROM_NNZ) == "igl"
 
 
 def test_pardiso_is_missing_without_mkl(monkeypatch):
