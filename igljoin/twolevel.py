@@ -301,7 +301,11 @@ class TwoLevelModel:
         t0 = time.perf_counter()
         X = state.X[ls.free]
         if first:
-            self.labels = clusters(X, ls.P[ls.free][:, ls.free], self.cluster_size)
+            # the factored form's free block as the graph: with the band rows solved through
+            # the augmented system (ls.wide) their dense block is never formed, and the
+            # other terms' block connects the mesh just as well
+            graph = ls.factor.Qff if ls.wide is None else ls.factor.Sff
+            self.labels = clusters(X, graph, self.cluster_size)
         t1 = time.perf_counter()
         self.factors = gauss_newton_factors(ls.terms, state, ls.n)
         t2 = time.perf_counter()
