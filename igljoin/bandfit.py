@@ -308,6 +308,8 @@ def band_fit(
     counts = np.asarray(tree.query_ball_point(A, band, return_length=True), dtype=np.int64)
     M = max(int(counts.max()) if k else 0, 1)
     if k * M > MAX_FIT_ENTRIES:
+        # the vertices within a band grow with its width² on a surface; 0.9 leaves room for
+        # the unevenness of a real mesh
         narrower = band * 0.9 * (MAX_FIT_ENTRIES / (k * M)) ** 0.5
         raise OptionsError(
             f"a band fit {band:.3g} mesh units wide reaches up to {M:,} mesh vertices around "

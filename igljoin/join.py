@@ -218,14 +218,17 @@ class JoinSolver:
         self.corr = c
         t1 = time.perf_counter()
         self.E = unique_edges(c.F)
-        self.guest_mean_edge = float(
-            np.linalg.norm(c.V[self.E[:, 0]] - c.V[self.E[:, 1]], axis=1).mean()
-        )
+        # the rest guest's measures (see join_result); its band fits serve the terms too
+        self._rest = RestMeasures(c, self.E)
+        self.guest_mean_edge = float(self._rest.edge_lengths.mean())
         # §4.2–4.4: shape, stretch and one smooth-join term per seam
         curves = [p.host_curve for p in self.pairs]
         self.bands = seam_bands(opt, host, c, curves, self.parts)
-        # the rest guest's measures (see join_result); its band fits serve the terms too
-        self._rest = RestMeasures(c, self.E)
+        # the band fits the measures will use (kept), made now: a band too large for its
+        # fit is refused here, not after a solve
+        for curve, part, band in zip(curves, self.parts, self.bands):
+            self.host_values.band_fit(curve, band)
+            self._rest.fit(part.seam[part.host_hit], curve.closed, band)
         built = build_terms(
             TermInputs(
                 opt, c, self.E, self.guest, host, self.host_values, curves, self.parts,

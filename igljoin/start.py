@@ -18,7 +18,7 @@ import numpy as np
 
 from .boundary import SelectedCurve, boundary_loops
 from .correspond import rigid_fit
-from .frames import face_areas, face_normals_areas, seam_frames
+from .frames import face_areas, seam_frames
 from .mesh import Mesh
 
 __all__ = ["rigid_start", "bulge", "bulge_basis", "BulgeBasis"]
@@ -87,7 +87,7 @@ def bulge_basis(
     """
     if curve is None or not curve.closed or len(boundary_loops(F)) != 1:
         return None
-    rest = face_normals_areas(V, F)[1].sum()
+    rest = face_areas(V, F).sum()
     frames = seam_frames(host.V, host.F, curve.indices, True)
     N = frames.normal.mean(axis=0)
     if np.linalg.norm(N) == 0:

@@ -42,3 +42,11 @@ def test_a_band_fit_too_large_is_refused_before_its_arrays(band_rows, monkeypatc
     monkeypatch.setattr(igljoin.bandfit, "MAX_FIT_ENTRIES", 100)
     with pytest.raises(igljoin.OptionsError, match="smooth_band=.*MAX_FIT_ENTRIES"):
         igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+
+
+def test_the_measures_band_fit_is_refused_before_the_solve(band_rows, monkeypatch):
+    s, _ = band_rows
+    monkeypatch.setattr(igljoin.bandfit, "MAX_FIT_ENTRIES", 100)
+    # the robust rows fit no band: only the result's measures do, and they are made at set-up
+    with pytest.raises(igljoin.OptionsError, match="MAX_FIT_ENTRIES"):
+        igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve, smooth_mode="robust")

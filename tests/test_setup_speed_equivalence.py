@@ -816,7 +816,12 @@ def test_the_terms_and_the_measures_share_the_rest_guests_band_fits(key, fits, m
     monkeypatch.setattr(
         bandfit, "band_fit", lambda V, *a, **k: made.append(len(V)) or fit(V, *a, **k)
     )
-    for name in ("igljoin.join_terms", "igljoin.measure_join", "igljoin.host_values"):
+    for name in (
+        "igljoin.join_terms",
+        "igljoin.measure_join",
+        "igljoin.host_values",
+        "igljoin.crease",
+    ):
         monkeypatch.setattr(importlib.import_module(name), "band_fit", bandfit.band_fit)
     solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
     solver.solve()
