@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import band_targets
-from .bandfit import BandFit, band_fit
+from .bandfit import BandFit
 from .boundary import SelectedCurve
 from .correspond import Correspondence
 from .crease import default_band
@@ -277,10 +277,10 @@ class TermInputs:
         Each seam's own correspondence.
     bands : list of float
         Each seam's band width (:func:`seam_bands`).
-    rest_fit : callable, optional
+    rest_fit : callable
         ``rest_fit(curve, closed, band)``: the rest guest's band fit along
-        ``curve`` (``band_fit(corr.V, corr.F, curve, closed, band)``), from a
-        store the solver's measures share (default: made here).
+        ``curve`` (``band_fit(corr.V, corr.F, curve, closed, band)``), from the
+        store the solver's measures share.
     """
 
     options: JoinOptions
@@ -292,7 +292,7 @@ class TermInputs:
     curves: list
     parts: list
     bands: list
-    rest_fit: Callable[[np.ndarray, bool, float], BandFit] | None = None
+    rest_fit: Callable[[np.ndarray, bool, float], BandFit]
 
 
 def _shape_terms(inputs: TermInputs) -> list[tuple[Term, np.ndarray | None]]:
@@ -318,11 +318,8 @@ def _smooth_terms(inputs: TermInputs) -> list[tuple[Term, np.ndarray | None]]:
     if opt.smooth_mode != "band":
         return [(_frame_term(opt, c, part, hc, inputs.host), None) for hc, part in seams]
     angles = join_angles(opt, len(seams))
-    rest_fit = inputs.rest_fit or (
-        lambda curve, closed, band: band_fit(c.V, c.F, curve, closed, band)
-    )
     return [
-        _band_term(opt, c, part, hc, inputs.host, inputs.host_values, band, angle, rest_fit)
+        _band_term(opt, c, part, hc, inputs.host, inputs.host_values, band, angle, inputs.rest_fit)
         for (hc, part), band, angle in zip(seams, inputs.bands, angles)
     ]
 

@@ -817,7 +817,6 @@ def test_the_terms_and_the_measures_share_the_rest_guests_band_fits(key, fits, m
         bandfit, "band_fit", lambda V, *a, **k: made.append(len(V)) or fit(V, *a, **k)
     )
     for name in (
-        "igljoin.join_terms",
         "igljoin.measure_join",
         "igljoin.host_values",
         "igljoin.crease",
