@@ -11,7 +11,8 @@ preconditioner that :class:`igljoin.solve.LocalGlobalSolver` factors, of the
 partial patch guest ``paper_sample("partial_patch", "equal",
 guest_resolution=sqrt(n / 1180))`` (the 1M case: the end-to-end tube, as
 ``pipelines/benchmark.py`` builds it). The matrices are assembled once (the
-factorization stubbed out) and cached as ``.npz`` in ``--cache``.
+factorization stubbed out) and cached as ``.npz`` in ``--cache``, named by a
+hash of the package's source (matrices of other code are never reused).
 
 Every (size, method) runs in its own subprocess, so that its peak memory
 (``ru_maxrss``) is its own. Each reports the factor time (ordering,
@@ -46,6 +47,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import hashlib
 import json
 import os
 import resource
@@ -140,6 +142,14 @@ def build(n: int, path: Path, smooth_mode: str) -> dict:
     sp.save_npz(path.with_suffix(".Q.npz"), Q)
     np.save(path.with_suffix(".fixed.npy"), ls.fixed)
     return {"vertices": int(ls.n), "free": int(ls.n - len(ls.fixed)), "build_s": seconds}
+
+
+def _code_digest() -> str:
+    """Short hash of the package's source files (what builds ``P`` and ``Q``)."""
+    digest = hashlib.sha256()
+    for f in sorted((ROOT / "igljoin").rglob("*.py")):
+        digest.update(f.read_bytes())
+    return digest.hexdigest()[:12]
 
 
 def load_free_block(path: Path, which: str = "P") -> sp.csr_matrix:
@@ -399,7 +409,8 @@ def main(argv=None) -> int:
     cache.mkdir(parents=True, exist_ok=True)
     rows = []
     for size in (int(float(v)) for v in args.sizes.split(",") if v):
-        path = cache / f"guest{size}-{args.smooth_mode}"
+        # named by the package's code, so a matrix saved by other code is never timed
+        path = cache / f"guest{size}-{args.smooth_mode}-{_code_digest()}"
         if not path.with_suffix(".fixed.npy").exists():
             job = {"n": size, "path": str(path), "smooth_mode": args.smooth_mode}
             built = _subprocess(["--build", json.dumps(job)], 3600)
