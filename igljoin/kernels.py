@@ -69,6 +69,21 @@ def incidence(E: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @nb.njit(cache=True, inline="always")
+def _row_times(ptr, idx, val, X, r):  # pragma: no cover - compiled
+    """Row ``r`` of a CSR matrix (``ptr``, ``idx``, ``val``) times ``X`` (n, 3): three floats."""
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    for k in range(ptr[r], ptr[r + 1]):
+        j = idx[k]
+        a = val[k]
+        s0 += a * X[j, 0]
+        s1 += a * X[j, 1]
+        s2 += a * X[j, 2]
+    return s0, s1, s2
+
+
+@nb.njit(cache=True, inline="always")
 def _add_opposite(G, i, j, r0, r1, r2):  # pragma: no cover - compiled
     """Add ``r`` to row ``i`` of ``G`` (n, 3) and subtract it from row ``j``.
 
@@ -250,15 +265,7 @@ def shape_local(
     for b in range(3):
         Rv[b, b] = 1.0
     for v in range(n):
-        s0 = 0.0
-        s1 = 0.0
-        s2 = 0.0
-        for k in range(Lp[v], Lp[v + 1]):
-            j = Li[k]
-            a = Lx[k]
-            s0 += a * X[j, 0]
-            s1 += a * X[j, 1]
-            s2 += a * X[j, 2]
+        s0, s1, s2 = _row_times(Lp, Li, Lx, X, v)
         LX[v, 0] = s0
         LX[v, 1] = s1
         LX[v, 2] = s2
@@ -472,15 +479,7 @@ def band_local(X, Kp, Ki, Kx, normal, outward, weights, tolerance, G):  # pragma
     """
     energy = 0.0
     for p in range(Kp.shape[0] - 1):
-        d0 = 0.0
-        d1 = 0.0
-        d2 = 0.0
-        for k in range(Kp[p], Kp[p + 1]):
-            j = Ki[k]
-            a = Kx[k]
-            d0 += a * X[j, 0]
-            d1 += a * X[j, 1]
-            d2 += a * X[j, 2]
+        d0, d1, d2 = _row_times(Kp, Ki, Kx, X, p)
         t0, t1, t2 = _wedge_target(
             d0, d1, d2, normal[p, 0], normal[p, 1], normal[p, 2],
             outward[p, 0], outward[p, 1], outward[p, 2], tolerance[p],
