@@ -167,6 +167,14 @@ def _resolves(solver, first, steps: int) -> dict:
     }
 
 
+def _earlier_runs(runs) -> list[dict]:
+    """Earlier runs' machine records as a flat list (older files nested them one in another)."""
+    if isinstance(runs, dict):
+        inner = dict(runs)
+        return [inner, *_earlier_runs(inner.pop("earlier_runs", []))]
+    return list(runs)
+
+
 def _with_model(solver, res, model) -> dict:
     """The same join with ``model`` as the quasi-Newton initial inverse Hessian.
 
@@ -955,7 +963,12 @@ def main(argv=None) -> int:
         previous = json.loads((out_dir / "benchmarks.json").read_text())
         kept_cases = [c for c in previous["cases"] if c["spec"]["kind"] not in kinds]
         results["throughput"] = previous.get("throughput")
-        results["machine"]["earlier_runs"] = previous["machine"]
+        # one flat list of the earlier runs' machines (each without its own list), newest first
+        earlier = dict(previous["machine"])
+        results["machine"]["earlier_runs"] = [
+            earlier,
+            *_earlier_runs(earlier.pop("earlier_runs", [])),
+        ]
     for spec in specs:
         name = _name(spec)
         print(f"{name} ...", end=" ", flush=True)
