@@ -111,8 +111,8 @@ def edge_strain(
     (:func:`edge_lengths`).
     """
     E = np.asarray(E)
-    l0 = _edge_lengths(V0, E) if rest_lengths is None else rest_lengths
-    l1 = _edge_lengths(V1, E)
+    l0 = edge_lengths(V0, E) if rest_lengths is None else rest_lengths
+    l1 = edge_lengths(V1, E)
     return (l1 - l0) / np.where(l0 > 0, l0, np.nan)
 
 
@@ -131,13 +131,8 @@ def _row_norms(D: np.ndarray) -> np.ndarray:
 
 def edge_lengths(V: np.ndarray, E: np.ndarray) -> np.ndarray:
     """Length of each edge ``V[E[:, 0]] − V[E[:, 1]]``, shape (e,), for ``E`` of shape (e, 2)."""
-    return _edge_lengths(V, np.asarray(E))
-
-
-def _edge_lengths(V: np.ndarray, E: np.ndarray) -> np.ndarray:
-    """Length of each edge ``V[E[:, 0]] − V[E[:, 1]]``, shape (e,), for ``E`` of shape (e, 2)."""
     VT = np.ascontiguousarray(np.asarray(V).T)  # (3, n)
-    ET = np.ascontiguousarray(E.T)  # (2, e)
+    ET = np.ascontiguousarray(np.asarray(E).T)  # (2, e)
     return _row_norms(np.take(VT, ET[0], axis=1) - np.take(VT, ET[1], axis=1))
 
 
