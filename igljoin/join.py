@@ -29,7 +29,7 @@ from .options import JoinOptions
 from .result import JoinResult
 from .seams import SeamPair
 from .solve import LocalGlobalSolver
-from .start import bulge, bulge_basis, rigid_start
+from .start import bulge, bulge_basis, path_prediction, rigid_start
 from .stiffness import needs_guest, resolve_stiffness
 from .terms import unique_edges
 from .twolevel import TwoLevelModel
@@ -46,6 +46,11 @@ _STRUCTURAL = JoinOptions.structural_fields()
 #: A host with more faces than this is checked near its curves only
 #: (:func:`igljoin.seams.host_neighbourhood`).
 HOST_CHECK_ALL_FACES = 200_000
+
+#: Earlier results a re-solve along a path of re-solves predicts its start from
+#: (:func:`igljoin.start.path_prediction`): two carry a slider's even steps on to
+#: second order.
+PATH_LENGTH = 2
 
 
 def _guest_mesh(guest: Any) -> Mesh:
@@ -243,6 +248,7 @@ class JoinSolver:
         # made on a solve's first use (see _bumped, initial_guess) and kept until the next set-up
         self._bump = None
         self._bulge_basis: Any = _UNSET
+        self._forget_path()
         self.timings.update(correspond=t1 - t0, terms=t2 - t1, factor=self.solver.factor_seconds)
 
     # -- solving ----------------------------------------------------------------------------
@@ -258,6 +264,8 @@ class JoinSolver:
         new = self.options.replace(**changes)
         old = self.options
         self.options = new
+        # the earlier results were minima under the old options
+        self._forget_path()
         structural = any(not _same(getattr(old, name), getattr(new, name)) for name in _STRUCTURAL)
         if structural:
             self._prepare()
@@ -290,7 +298,16 @@ class JoinSolver:
         return self._bump
 
     def warm_start(self, start: Any, targets: np.ndarray) -> np.ndarray:
-        """Positions ``start`` with their seam moved onto ``targets``, the move extended smoothly.
+        """Positions ``start`` moved onto the seam ``targets``: where a re-solve starts.
+
+        ``start`` is first carried on along the path of re-solves that led
+        to it, if it is the latest result of such a path (each solved from
+        the one before by this solver, with no option changed in between):
+        the earlier results' own moves predict the guest's response to the
+        new targets (:func:`igljoin.start.path_prediction`). Then the rigid
+        motion that best fits its seam onto the targets moves it, and the
+        remaining seam move is extended smoothly, as for
+        :meth:`initial_guess`.
 
         Parameters
         ----------
@@ -303,6 +320,15 @@ class JoinSolver:
         -------
         ndarray, shape (n', 3)
         """
+        X = self._start_positions(start)
+        seam = self.corr.seam
+        path = self._path_to(X)
+        X = path_prediction(X, path[-1 - PATH_LENGTH : -1], seam, targets)
+        X = rigid_start(X, seam, targets)
+        return X + self.solver.extend(targets - X[seam])
+
+    def _start_positions(self, start: Any) -> np.ndarray:
+        """``start`` as a checked (n', 3) array of positions (a copy)."""
         if isinstance(start, JoinResult):
             start = start.guest.V
         n = len(self.corr.V)
@@ -315,7 +341,36 @@ class JoinSolver:
                 f"start must be a finite array of shape ({n}, 3) (the refined guest's positions, "
                 "e.g. an earlier result's guest.V) or a JoinResult of this solver"
             )
-        return X + self.solver.extend(targets - X[self.corr.seam])
+        return X
+
+    # -- the path of re-solves (what warm_start predicts from) -----------------------------
+
+    def _forget_path(self) -> None:
+        # _path: converged results, oldest first, each solved from the one before;
+        # _origin: the latest converged solve from the initial guess (a path's first)
+        self._path: list[np.ndarray] = []
+        self._origin: np.ndarray | None = None
+
+    def _path_to(self, X: np.ndarray) -> list[np.ndarray]:
+        """The kept results of the path that ends at positions ``X``, oldest first ([] if none)."""
+        if self._path and np.array_equal(X, self._path[-1]):
+            return self._path
+        if self._origin is not None and np.array_equal(X, self._origin):
+            return [self._origin]
+        return []
+
+    def _extend_path(self, start: np.ndarray | None, run: Any, X: np.ndarray) -> None:
+        """Keep the result ``X`` of a solve from ``start`` (``None``: the initial guess)."""
+        if not run.converged:
+            # not a minimum: nothing to predict from
+            if start is not None:
+                self._path = []
+            return
+        X = np.array(X, dtype=np.float64)
+        if start is None:
+            self._origin = X
+        else:
+            self._path = (self._path_to(start) + [X])[-1 - PATH_LENGTH :]
 
     def solve(
         self,
@@ -362,7 +417,11 @@ class JoinSolver:
                 "seam vertex)"
             )
         t0 = time.perf_counter()
-        X0 = self.initial_guess(bc) if start is None else self.warm_start(start, bc)
+        if start is None:
+            X0 = self.initial_guess(bc)
+        else:
+            start = self._start_positions(start)
+            X0 = self.warm_start(start, bc)
         t1 = time.perf_counter()
 
         def report(iteration: int, energy: float) -> None:
@@ -397,6 +456,7 @@ class JoinSolver:
             built=self.built,
             rest=self._rest,
         )
+        self._extend_path(start, run, result.guest.V)
         t3 = time.perf_counter()
         timings = dict(self.timings)
         timings.update(
