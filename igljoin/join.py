@@ -148,7 +148,11 @@ class JoinSolver:
     smooth term rebuilds it (:attr:`factorizations` counts them).
     ``solve(targets, start=previous_result)`` also starts from the previous
     result, which after a small change of the targets needs fewer
-    iterations.
+    iterations. Along a path of such re-solves (a slider: each solved from
+    the result before) the solver keeps the last ``PATH_LENGTH + 1`` (3)
+    results of the path, copies of the guest positions, and predicts the
+    next start from their moves (:meth:`warm_start`); any option change
+    forgets them.
 
     A host of more than ``HOST_CHECK_ALL_FACES`` (200,000) faces whose
     curves are given by vertex indices is checked, selected and measured
@@ -392,9 +396,10 @@ class JoinSolver:
             Start the iteration from these positions of the refined guest
             (e.g. the previous result, for a re-solve after a small change
             of the targets) instead of :meth:`initial_guess`; the seam is
-            moved onto the targets and the move extended smoothly
-            (:meth:`warm_start`). A start at the minimum stops after one or
-            two iterations.
+            moved onto the targets rigidly and the rest of the move extended
+            smoothly, after a prediction from the earlier results when the
+            start ends a path of re-solves (:meth:`warm_start`). A start at
+            the minimum stops after one or two iterations.
         progress : callable, optional
             Called with a :class:`SolveProgress` after every iteration (for
             a progress display of long solves; it should return quickly).
