@@ -151,8 +151,9 @@ class JoinSolver:
     iterations. Along a path of such re-solves (a slider: each solved from
     the result before) the solver keeps the last ``PATH_LENGTH + 1`` (3)
     results of the path, copies of the guest positions, and predicts the
-    next start from their moves (:meth:`warm_start`); any option change
-    forgets them.
+    next start from their moves (:meth:`warm_start`); an option change that
+    rebuilds the factorization forgets them, a change of the iteration
+    settings does not (it leaves the minima where they are).
 
     A host of more than ``HOST_CHECK_ALL_FACES`` (200,000) faces whose
     curves are given by vertex indices is checked, selected and measured
@@ -268,8 +269,6 @@ class JoinSolver:
         new = self.options.replace(**changes)
         old = self.options
         self.options = new
-        # the earlier results were minima under the old options
-        self._forget_path()
         structural = any(not _same(getattr(old, name), getattr(new, name)) for name in _STRUCTURAL)
         if structural:
             self._prepare()
@@ -306,7 +305,7 @@ class JoinSolver:
 
         ``start`` is first carried on along the path of re-solves that led
         to it, if it is the latest result of such a path (each solved from
-        the one before by this solver, with no option changed in between):
+        the one before by this solver, within one set-up):
         the earlier results' own moves predict the guest's response to the
         new targets (:func:`igljoin.start.path_prediction`). Then the rigid
         motion that best fits its seam onto the targets moves it, and the

@@ -472,8 +472,12 @@ def test_re_solves_along_a_path_start_near_the_next_minimum(patch):
     for k in (1, 2, 3):
         results.append(solver.solve(_turned(T0, k), start=results[-1]))
     T = _turned(T0, 4)
+
+    def plain_start(X, targets, **options):
+        return _solver(patch, **options).warm_start(X, targets)  # a solver that knows no path
+
     predicted = solver.warm_start(results[-1], T)
-    plain = _solver(patch).warm_start(results[-1], T)  # a solver that knows no path
+    plain = plain_start(results[-1], T)
     tight = _solver(patch).solve(T, energy_tolerance=1e-12, max_iterations=5000)
     assert tight.converged
     e, e_min = solver.solver.energy, tight.energy[-1]
@@ -488,11 +492,13 @@ def test_re_solves_along_a_path_start_near_the_next_minimum(patch):
     # iterations), so the energies agree to well within 1e-6 of the long run's
     for r in (warm, cold):
         assert abs(r.energy[-1] - e_min) <= 1e-6 * e_min
-    # an option change forgets the path: the earlier results were minima of other options
+    # an iteration setting leaves the minima (and the path) as they are; a weight change
+    # makes new ones (a new set-up) and forgets the path
+    T5 = _turned(T0, 5)
     solver.update(energy_tolerance=1e-8)
-    assert np.array_equal(
-        solver.warm_start(warm, _turned(T0, 5)), _solver(patch).warm_start(warm, _turned(T0, 5))
-    )
+    assert not np.array_equal(solver.warm_start(warm, T5), plain_start(warm, T5))
+    solver.update(stretch_weight=2.0)
+    assert np.array_equal(solver.warm_start(warm, T5), plain_start(warm, T5, stretch_weight=2.0))
 
 
 # -- reuse of the factorization across solves ----------------------------------------------
