@@ -51,13 +51,13 @@ def path_prediction(
 
     ``X`` and every array of ``earlier`` are minima of the same energy for
     their own seam positions (results of one solver, each solved from the
-    next). The seam move ``targets − X[seam]`` is fitted, in the least
+    one before). The seam move ``targets − X[seam]`` is fitted, in the least
     squares, by the moves between them, ``Σ c_j (X[seam] − X_j[seam])``, and
     the same combination of the whole guests' moves is added:
     ``X + Σ c_j (X − X_j)``. The minimum depends smoothly on the seam, so
     the part of the move the earlier ones span is predicted to first order
-    (to second with two of them on a slider's even steps), whereas
-    extending a seam move smoothly predicts none of the guest's own
+    (the solver uses one earlier minimum: :data:`igljoin.join.PATH_LENGTH`),
+    whereas extending a seam move smoothly predicts none of the guest's own
     response; the part they do not span is left to that extension.
 
     Parameters
