@@ -269,19 +269,36 @@ def shape_local(
         LX[v, 0] = s0
         LX[v, 1] = s1
         LX[v, 2] = s2
-        Av = A[v]
-        for a in range(3):
-            Av[0, a] = s0 * delta[v, a]
-            Av[1, a] = s1 * delta[v, a]
-            Av[2, a] = s2 * delta[v, a]
+        # the covariance in scalars (kept in registers; the sums in the same order)
+        x0 = delta[v, 0]
+        x1 = delta[v, 1]
+        x2 = delta[v, 2]
+        c00, c01, c02 = s0 * x0, s0 * x1, s0 * x2
+        c10, c11, c12 = s1 * x0, s1 * x1, s1 * x2
+        c20, c21, c22 = s2 * x0, s2 * x1, s2 * x2
         for k in range(inc_ptr[v], inc_ptr[v + 1]):
             e = inc_edges[k]
             i = E[e, 0]
             j = E[e, 1]
-            for b in range(3):
-                db = mu * (X[i, b] - X[j, b])
-                for a in range(3):
-                    Av[b, a] += db * rest_edges[e, a]
+            e0 = rest_edges[e, 0]
+            e1 = rest_edges[e, 1]
+            e2 = rest_edges[e, 2]
+            db = mu * (X[i, 0] - X[j, 0])
+            c00 += db * e0
+            c01 += db * e1
+            c02 += db * e2
+            db = mu * (X[i, 1] - X[j, 1])
+            c10 += db * e0
+            c11 += db * e1
+            c12 += db * e2
+            db = mu * (X[i, 2] - X[j, 2])
+            c20 += db * e0
+            c21 += db * e1
+            c22 += db * e2
+        Av = A[v]
+        Av[0, 0], Av[0, 1], Av[0, 2] = c00, c01, c02
+        Av[1, 0], Av[1, 1], Av[1, 2] = c10, c11, c12
+        Av[2, 0], Av[2, 1], Av[2, 2] = c20, c21, c22
         if use_hint:
             for b in range(3):
                 for a in range(3):

@@ -4,7 +4,10 @@
 its seam onto the targets; the solver then extends the remaining seam move
 smoothly (:meth:`igljoin.solve.LocalGlobalSolver.extend`), and :func:`bulge`
 lifts a guest that this leaves compressed (what it reads of the rest guest and
-the host, :func:`bulge_basis`, is made once per set-up).
+the host, :func:`bulge_basis`, is made once per set-up). A re-solve starts
+from an earlier result instead, moved the same way; along a path of
+re-solves (a slider) :func:`path_prediction` first carries it on by the
+earlier results' own moves.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from .correspond import rigid_fit
 from .frames import face_areas, seam_frames
 from .mesh import Mesh
 
-__all__ = ["rigid_start", "bulge", "bulge_basis", "BulgeBasis"]
+__all__ = ["rigid_start", "path_prediction", "bulge", "bulge_basis", "BulgeBasis"]
 
 
 def rigid_start(V: np.ndarray, seam: np.ndarray, targets: np.ndarray) -> np.ndarray:
@@ -39,6 +42,46 @@ def rigid_start(V: np.ndarray, seam: np.ndarray, targets: np.ndarray) -> np.ndar
     """
     R, t = rigid_fit(V[seam], targets)
     return V @ R.T + t
+
+
+def path_prediction(
+    X: np.ndarray, earlier: list[np.ndarray], seam: np.ndarray, targets: np.ndarray
+) -> np.ndarray:
+    """``X`` carried on along a path of minima towards new seam ``targets``.
+
+    ``X`` and every array of ``earlier`` are minima of the same energy for
+    their own seam positions (results of one solver, each solved from the
+    one before). The seam move ``targets − X[seam]`` is fitted, in the least
+    squares, by the moves between them, ``Σ c_j (X[seam] − X_j[seam])``, and
+    the same combination of the whole guests' moves is added:
+    ``X + Σ c_j (X − X_j)``. The minimum depends smoothly on the seam, so
+    the part of the move the earlier ones span is predicted to first order
+    (the solver uses one earlier minimum: :data:`igljoin.join.PATH_LENGTH`),
+    whereas extending a seam move smoothly predicts none of the guest's own
+    response; the part they do not span is left to that extension.
+
+    Parameters
+    ----------
+    X : ndarray, shape (n, 3)
+        The latest minimum.
+    earlier : list of ndarray, each shape (n, 3)
+        Earlier minima (any order; none: ``X`` is returned).
+    seam : ndarray of int64, shape (s,)
+    targets : ndarray, shape (s, 3)
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        The prediction; its seam is near, not on, ``targets``.
+    """
+    if not earlier:
+        return X
+    D = np.stack([(X[seam] - Xj[seam]).ravel() for Xj in earlier], axis=1)
+    c = np.linalg.lstsq(D, (targets - X[seam]).ravel(), rcond=None)[0]
+    out = X.copy()
+    for cj, Xj in zip(c, earlier):
+        out += cj * (X - Xj)
+    return out
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 import igljoin
 from igljoin import linsolve, phantoms
 from igljoin.rotations import fit_rotations, fit_rotations_igl
+from igljoin.start import path_prediction
 from igljoin.terms import LocalState, ShapeTerm, StretchTerm, Term
 
 HAVE_CHOLESPY = "cholespy" in linsolve.available_backends()
@@ -424,6 +425,81 @@ def test_bad_start_is_rejected(patch):
     for bad in (np.zeros((n - 1, 3)), np.full((n, 3), np.nan), "guest"):
         with pytest.raises(igljoin.OptionsError, match="start must be"):
             solver.solve(start=bad)
+
+
+# -- where a re-solve starts ---------------------------------------------------------------
+
+
+def _turned(points: np.ndarray, degrees: float, centre: np.ndarray | None = None) -> np.ndarray:
+    """Points turned about the x axis through ``centre`` (default: their centroid; seam
+    targets turned so are a slider's step)."""
+    t = np.radians(degrees)
+    R = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(t), -np.sin(t)], [0.0, np.sin(t), np.cos(t)]])
+    c = points.mean(axis=0) if centre is None else centre
+    return (points - c) @ R.T + c
+
+
+def test_a_rigid_move_of_the_seam_moves_the_start_rigidly(tube):
+    """Seam targets turned as a whole: the re-solve starts from the earlier result turned."""
+    solver = _solver(tube)
+    first = solver.solve()
+    T = _turned(first.seam_targets, 5.0)
+    start = solver.warm_start(first, T)
+    expected = _turned(first.guest.V, 5.0, centre=first.seam_targets.mean(axis=0))
+    # the rigid fit of the seam recovers the turn to rounding, and the seam move left
+    # to extend is rounding too: 1e-9 of the guest's size is far above both
+    np.testing.assert_allclose(start, expected, atol=1e-9 * _size(tube))
+
+
+def test_path_prediction_is_exact_for_a_linear_response():
+    """Minima that depend linearly on their seam are predicted exactly from two of them."""
+    rng = np.random.default_rng(3)
+    n, seam = 40, np.arange(6)
+    base, modes = rng.normal(size=(n, 3)), rng.normal(size=(2, n, 3))
+    X = [base + a * modes[0] + b * modes[1] for a, b in ((0.0, 0.0), (1.0, 0.2), (0.3, 0.9))]
+    want = base - 0.7 * modes[0] + 2.5 * modes[1]
+    got = path_prediction(X[0], X[1:], seam, want[seam])
+    # a least-squares fit of two coefficients and a sum of three terms: rounding only
+    np.testing.assert_allclose(got, want, atol=1e-12 * np.abs(want).max())
+    assert path_prediction(X[0], [], seam, want[seam]) is X[0]
+
+
+def test_re_solves_along_a_path_start_near_the_next_minimum(patch):
+    """Each re-solve from the one before: the earlier moves predict the next start."""
+    solver = _solver(patch)
+    results = [solver.solve()]
+    T0 = results[0].seam_targets
+    for k in (1, 2, 3):
+        results.append(solver.solve(_turned(T0, k), start=results[-1]))
+    T = _turned(T0, 4)
+
+    def plain_start(X, targets, **options):
+        return _solver(patch, **options).warm_start(X, targets)  # a solver that knows no path
+
+    predicted = solver.warm_start(results[-1], T)
+    plain = plain_start(results[-1], T)
+    tight = _solver(patch).solve(T, energy_tolerance=1e-12, max_iterations=5000)
+    assert tight.converged
+    e, e_min = solver.solver.energy, tight.energy[-1]
+    # measured: the prediction leaves 2e-4 to 2e-3 of the plain start's excess energy
+    # (first order: what is left is the response's curvature over the step, and each
+    # earlier result's own convergence error), so 1e-2 leaves a margin of five and still
+    # fails a start that predicts nothing
+    assert e(predicted) - e_min < 1e-2 * (e(plain) - e_min)
+    warm = solver.solve(T, start=results[-1])
+    cold = solver.solve(T)
+    assert warm.converged and warm.iterations < cold.iterations
+    # the same minimum: both stop within their tolerance (1e-7 relative over five
+    # iterations), so the energies agree to well within 1e-6 of the long run's
+    for r in (warm, cold):
+        assert abs(r.energy[-1] - e_min) <= 1e-6 * e_min
+    # an iteration setting leaves the minima (and the path) as they are; a weight change
+    # makes new ones (a new set-up) and forgets the path
+    T5 = _turned(T0, 5)
+    solver.update(energy_tolerance=1e-8)
+    assert not np.array_equal(solver.warm_start(warm, T5), plain_start(warm, T5))
+    solver.update(stretch_weight=2.0)
+    assert np.array_equal(solver.warm_start(warm, T5), plain_start(warm, T5, stretch_weight=2.0))
 
 
 # -- reuse of the factorization across solves ----------------------------------------------
