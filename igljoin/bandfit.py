@@ -49,18 +49,21 @@ BAND_EDGES = 3.0
 
 #: Size guard of one band fit: the entries of its rows, i.e. the mesh vertices within
 #: the band summed over the curve vertices, counted before any array of the fit is
-#: made (its work arrays are chunked, :data:`FIT_CHUNK_ENTRIES`). A join keeps its rows
-#: several times over (the fit, the smooth-join term's rows and their compiled copies,
-#: the augmented system's matrix and factor): about :data:`_BYTES_PER_ENTRY` bytes
-#: each. A 1M-vertex tube under the paper's host has 5.5e7. Change with
+#: made (its work arrays are chunked, :data:`FIT_CHUNK_ENTRIES`, so only its rows grow
+#: with the band). A join spends about :data:`_BYTES_PER_ENTRY` bytes per entry on
+#: them (the fit, the smooth-join term's copies, the augmented system's matrix and
+#: factor), so 1e8 entries are about 15 GB on top of the join without them. A
+#: 1M-vertex tube under the paper's host has 5.5e7. Change with
 #: ``igljoin.bandfit.MAX_FIT_ENTRIES``.
-MAX_FIT_ENTRIES = 200_000_000
+MAX_FIT_ENTRIES = 100_000_000
 
-#: Bytes a join spends per entry of a band fit's rows (see :data:`MAX_FIT_ENTRIES`).
-_BYTES_PER_ENTRY = 60
+#: Bytes a join spends per entry of its band fit (see :data:`MAX_FIT_ENTRIES`): measured
+#: on the 1M-vertex tube, a peak of 10.5 GB with 5.5e7 entries against 2.8 GB for the
+#: same join with the one-ring smooth rows (no band), about 140 bytes an entry.
+_BYTES_PER_ENTRY = 150
 
 #: Work-array entries (curve vertices × band vertices, padded) of one chunk of a band
-#: fit; about 300 bytes each, so about 150 MB of work arrays at a time.
+#: fit; about 260 bytes each (measured on the 300k tube), so about 140 MB at a time.
 FIT_CHUNK_ENTRIES = 1 << 19
 
 #: A band vertex whose normal turns more than about 70° from the curve vertex's
@@ -394,11 +397,12 @@ def _check_size(band: float, k: int, total: int, widest: int) -> None:
     # the unevenness of a real mesh
     narrower = band * 0.9 * (MAX_FIT_ENTRIES / total) ** 0.5
     raise OptionsError(
-        f"a band fit {band:.3g} mesh units wide has {total:,} entries (up to {widest:,} "
-        f"mesh vertices around each of {k:,} curve vertices; about "
-        f"{_BYTES_PER_ENTRY * total / 1e9:.1f} GB in the join's copies of its rows), more "
-        f"than the size guard of {MAX_FIT_ENTRIES:,}: the mesh is much finer than the band; "
-        f"give smooth_band={narrower:.3g} or less, or raise igljoin.bandfit.MAX_FIT_ENTRIES"
+        f"a band fit {band:.3g} mesh units wide has {total:,} entries (up to {widest:,} mesh "
+        f"vertices around each of {k:,} curve vertices; about "
+        f"{_BYTES_PER_ENTRY * total / 1e9:.2g} GB for the join's copies and factor of its "
+        f"rows), more than the size guard of {MAX_FIT_ENTRIES:,}: the mesh is much finer "
+        f"than the band; give smooth_band={narrower:.3g} or less, or raise "
+        "igljoin.bandfit.MAX_FIT_ENTRIES"
     )
 
 
