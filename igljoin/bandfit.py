@@ -335,7 +335,8 @@ def band_fit(
     total = int(counts.sum())
     _check_size(band, k, total, int(counts.max()) if k else 0)
     M = max(int(counts.max()) if k else 0, 1)
-    chunks = [slice(s, min(s + _rows_per_chunk(M), k)) for s in range(0, k, _rows_per_chunk(M))]
+    rows = _rows_per_chunk(M)
+    chunks = [slice(s, min(s + rows, k)) for s in range(0, k, rows)]
     offsets = np.concatenate([[0], np.cumsum(counts)])
     # every row's band vertices, one after another (what its rows will hold, at most)
     hits = np.empty(total, dtype=np.int32 if n < 2**31 else np.int64)
