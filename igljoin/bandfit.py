@@ -47,12 +47,24 @@ __all__ = [
 #: row at the curve, narrow enough to stay local on the paper's tubes.
 BAND_EDGES = 3.0
 
-#: Size guard of one band fit: curve vertices × the most mesh vertices within the band
-#: of one of them. The fit's work arrays hold about 200 bytes per entry, so 4e7 entries
-#: are about 8 GB; a guest far finer than the band (a 1M-vertex tube under the paper's
-#: host) reaches it before any matrix is built. Change with
+#: Size guard of one band fit: the entries of its rows, i.e. the mesh vertices within
+#: the band summed over the curve vertices, counted before any array of the fit is
+#: made (its work arrays are chunked, :data:`FIT_CHUNK_ENTRIES`, so only its rows grow
+#: with the band). A join spends about :data:`_BYTES_PER_ENTRY` bytes per entry on
+#: them (the fit, the smooth-join term's copies, the augmented system's matrix and
+#: factor), so 1e8 entries are about 15 GB on top of the join without them. A
+#: 1M-vertex tube under the paper's host has 5.5e7. Change with
 #: ``igljoin.bandfit.MAX_FIT_ENTRIES``.
-MAX_FIT_ENTRIES = 40_000_000
+MAX_FIT_ENTRIES = 100_000_000
+
+#: Bytes a join spends per entry of its band fit (see :data:`MAX_FIT_ENTRIES`): measured
+#: on the 1M-vertex tube, a peak of 10.5 GB with 5.5e7 entries against 2.8 GB for the
+#: same join with the one-ring smooth rows (no band), about 140 bytes an entry.
+_BYTES_PER_ENTRY = 150
+
+#: Work-array entries (curve vertices × band vertices, padded) of one chunk of a band
+#: fit; about 260 bytes each (measured on the 300k tube), so about 140 MB at a time.
+FIT_CHUNK_ENTRIES = 1 << 19
 
 #: A band vertex whose normal turns more than about 70° from the curve vertex's
 #: normal is on another sheet of the surface (the far side of a thin wall or wing).
@@ -271,6 +283,14 @@ def band_fit(
 ) -> BandFit:
     """Fit the surface beside a boundary curve over a band, at each curve vertex.
 
+    The curve vertices are fitted in chunks of :func:`_rows_per_chunk` rows, so
+    the work arrays (curve vertices × band vertices) stay within
+    :data:`FIT_CHUNK_ENTRIES` entries whatever the band and the mesh; only the
+    fit's rows grow with them, and those are refused beyond
+    :data:`MAX_FIT_ENTRIES` before any is made. Each row's floats are those of
+    one pass over the whole curve (the same operations on the same band
+    vertices, padded to the same width).
+
     Parameters
     ----------
     V, F, curve, closed
@@ -286,6 +306,12 @@ def band_fit(
     Returns
     -------
     BandFit
+
+    Raises
+    ------
+    OptionsError
+        When the fit's rows would hold more than :data:`MAX_FIT_ENTRIES`
+        entries, with a ``smooth_band`` that fits.
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
@@ -306,59 +332,146 @@ def band_fit(
 
     tree = cKDTree(V[near])
     counts = np.asarray(tree.query_ball_point(A, band, return_length=True), dtype=np.int64)
-    M = max(int(counts.max()) if k else 0, 1)
-    if k * M > MAX_FIT_ENTRIES:
-        # the vertices within a band grow with its width² on a surface; 0.9 leaves room for
-        # the unevenness of a real mesh
-        narrower = band * 0.9 * (MAX_FIT_ENTRIES / (k * M)) ** 0.5
-        raise OptionsError(
-            f"a band fit {band:.3g} mesh units wide reaches up to {M:,} mesh vertices around "
-            f"each of {k:,} curve vertices ({k * M:,} entries, about {200e-9 * k * M:.0f} GB "
-            f"of work arrays), more than the size guard of {MAX_FIT_ENTRIES:,}: the mesh is "
-            f"much finer than the band; give smooth_band={narrower:.3g} or less, or raise "
-            "igljoin.bandfit.MAX_FIT_ENTRIES"
-        )
-    hits = tree.query_ball_point(A, band)
-    idx = np.zeros((k, M), dtype=np.int64)
-    valid = np.arange(M)[None, :] < counts[:, None]
     total = int(counts.sum())
-    if total:
-        idx[valid] = near[np.fromiter(chain.from_iterable(hits), dtype=np.int64, count=total)]
-    valid &= idx != curve[:, None]
-    # on the same sheet of the surface as the curve vertex
-    n0, VNb = VN[curve], VN[idx]
-    valid &= np.einsum("kmj,kj->km", VNb, n0) > _SAME_SHEET_COS
-    D = V[idx] - A[:, None, :]
-    w_area = np.where(valid, 1.0, 0.0)
-    n0 = unit(np.einsum("km,kmj->kj", w_area, VNb) + n0)
+    _check_size(band, k, total, int(counts.max()) if k else 0)
+    M = max(int(counts.max()) if k else 0, 1)
+    rows = _rows_per_chunk(M)
+    chunks = [slice(s, min(s + rows, k)) for s in range(0, k, rows)]
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    # every row's band vertices, one after another (what its rows will hold, at most)
+    hits = np.empty(total, dtype=np.int32 if n < 2**31 else np.int64)
+    n0 = VN[curve]
+    pulled = np.zeros((k, 3))
+    for sl in chunks:
+        found = tree.query_ball_point(A[sl], band)
+        size = int(offsets[sl.stop] - offsets[sl.start])
+        got = np.fromiter(chain.from_iterable(found), dtype=np.int64, count=size)
+        hits[offsets[sl.start] : offsets[sl.stop]] = near[got]
+        _, valid, VNb = _band_rows(hits, offsets, counts, curve, VN, sl, M)
+        pulled[sl] = np.einsum("km,kmj->kj", np.where(valid, 1.0, 0.0), VNb)
+    n0 = unit(pulled + n0)
+    del pulled
     g0 = unit(np.cross(n0, T))
     # into the surface: the faces lie to the left of their own boundary edges (seen
     # along the normal), so the curve's order against theirs fixes the side exactly;
-    # where no curve edge is a mesh edge, the band's centroid decides
+    # where no curve edge is a mesh edge, the band's centroid decides (in the chunks)
     side = _orientation_side(F, curve, closed)
-    unknown = side == 0
-    if unknown.any():
-        side[unknown] = np.sign(np.einsum("km,kmj,kj->k", w_area, D, g0))[unknown]
-    g0[side < 0] *= -1.0
     along = min(band, along_curve_reach(P, closed, n0, band))
+    parts, used, normal, inward, slope_error = [], [], [], [], []
+    for sl in chunks:
+        idx, valid, _ = _band_rows(hits, offsets, counts, curve, VN, sl, M)
+        D = V[idx] - A[sl, None, :]
+        g = g0[sl]
+        unknown = side[sl] == 0
+        if unknown.any():
+            w_area = np.where(valid, 1.0, 0.0)
+            side[sl][unknown] = np.sign(np.einsum("km,kmj,kj->k", w_area, D, g))[unknown]
+        g[side[sl] < 0] *= -1.0
+        fit = _chunk_fit(V, idx, valid, D, curve[sl], T[sl], g, n0[sl], band, along)
+        parts.append(fit[0])
+        used.append(fit[1])
+        inward.append(fit[2])
+        normal.append(fit[3])
+        slope_error.append(fit[4])
+    return BandFit(
+        weights=_stack_rows(parts, k, n),
+        frames=SeamFrames(
+            normal=_rows_of(normal, (0, 3)),
+            tangent=T,
+            inward=_rows_of(inward, (0, 3)),
+        ),
+        band=band,
+        counts=_rows_of(used, (0,), np.int64),
+        slope_error=_rows_of(slope_error, (0,)),
+    )
+
+
+def _check_size(band: float, k: int, total: int, widest: int) -> None:
+    """Refuse a fit whose rows would hold more than :data:`MAX_FIT_ENTRIES` entries.
+
+    ``total`` band vertices summed over the ``k`` curve vertices (at most
+    ``widest`` at one), counted before any array of the fit is made.
+    """
+    if total <= MAX_FIT_ENTRIES:
+        return
+    # the vertices within a band grow with its width² on a surface; 0.9 leaves room for
+    # the unevenness of a real mesh
+    narrower = band * 0.9 * (MAX_FIT_ENTRIES / total) ** 0.5
+    raise OptionsError(
+        f"a band fit {band:.3g} mesh units wide has {total:,} entries (up to {widest:,} mesh "
+        f"vertices around each of {k:,} curve vertices; about "
+        f"{_BYTES_PER_ENTRY * total / 1e9:.2g} GB for the join's copies and factor of its "
+        f"rows), more than the size guard of {MAX_FIT_ENTRIES:,}: the mesh is much finer "
+        f"than the band; give smooth_band={narrower:.3g} or less, or raise "
+        "igljoin.bandfit.MAX_FIT_ENTRIES"
+    )
+
+
+def _rows_per_chunk(M: int) -> int:
+    """Curve vertices fitted together when each has ``M`` band vertices (padded)."""
+    return max(1, FIT_CHUNK_ENTRIES // M)
+
+
+def _band_rows(hits, offsets, counts, curve, VN, sl: slice, M: int):
+    """Band vertices of the curve vertices ``sl``, padded to ``M``: ``idx``, ``valid``, ``VNb``.
+
+    ``idx`` (r, M) int64 and ``valid`` (r, M) bool: each row's band vertices
+    (``hits[offsets[i]:offsets[i + 1]]``) then zeros, valid where a band vertex
+    other than the curve vertex lies on the curve vertex's sheet of the
+    surface; ``VNb`` (r, M, 3) their vertex normals ``VN`` (n, 3).
+    """
+    idx = np.zeros((sl.stop - sl.start, M), dtype=np.int64)
+    valid = np.arange(M)[None, :] < counts[sl, None]
+    idx[valid] = hits[offsets[sl.start] : offsets[sl.stop]]
+    valid &= idx != curve[sl, None]
+    VNb = VN[idx]
+    # on the same sheet of the surface as the curve vertex
+    valid &= np.einsum("kmj,kj->km", VNb, VN[curve[sl]]) > _SAME_SHEET_COS
+    return idx, valid, VNb
+
+
+def _chunk_fit(V, idx, valid, D, curve, T, g0, n0, band: float, along: float):
+    """The fit at ``r`` curve vertices from their padded band vertices.
+
+    Parameters
+    ----------
+    V : ndarray, shape (n, 3)
+    idx, valid : ndarray, shape (r, M)
+        From :func:`_band_rows`.
+    D : ndarray, shape (r, M, 3)
+        Band vertices less their curve vertex.
+    curve : ndarray of int64, shape (r,)
+    T, g0, n0 : ndarray, shape (r, 3)
+        Tangent, rough direction into the surface and band normal.
+    band, along : float
+        Band width across and along the curve.
+
+    Returns
+    -------
+    rows : scipy.sparse.csr_matrix, shape (r, n)
+    used : ndarray of int64, shape (r,)
+    inward, normal : ndarray, shape (r, 3)
+    slope_error : ndarray, shape (r,)
+    """
+    r, M = idx.shape
     u = np.einsum("kmj,kj->km", D, T) / band
     v = np.einsum("kmj,kj->km", D, g0) / band
     # an ellipsoid: ``along`` wide in the curve's direction, ``band`` across it and
     # off the surface, so the bend of a tube around its end stays out of the fit
     ua = u * (band / along)
     r2 = ua * ua + v * v + (np.einsum("kmj,kj->km", D, n0) / band) ** 2
-    valid &= r2 <= 1.0
+    valid = valid & (r2 <= 1.0)
     w = np.where(valid, (1.0 - r2) ** 2 + 1e-3, 0.0)
     used = valid.sum(axis=1)
     X = _columns(u, v, used)
     Z = _fit_rows(X, w)
     beta = Z[:, 1, :] / band
-    rows = np.repeat(np.arange(k), M)
+    rows = np.repeat(np.arange(r), M)
     data = np.concatenate([beta.reshape(-1), -beta.sum(axis=1)])
     cols = np.concatenate([idx.reshape(-1), curve])
-    rows = np.concatenate([rows, np.arange(k)])
+    rows = np.concatenate([rows, np.arange(r)])
     keep = data != 0
-    W = sp.csr_matrix((data[keep], (rows[keep], cols[keep])), shape=(k, n))
+    W = sp.csr_matrix((data[keep], (rows[keep], cols[keep])), shape=(r, len(V)))
     c = W @ V
     inward = unit(c - np.einsum("ij,ij->i", c, T)[:, None] * T)
     # where the band is empty keep the rough frame
@@ -366,13 +479,29 @@ def band_fit(
     inward[empty] = g0[empty]
     normal = unit(np.cross(inward, T))
     normal[np.einsum("ij,ij->i", normal, n0) < 0] *= -1.0
-    return BandFit(
-        weights=W,
-        frames=SeamFrames(normal=normal, tangent=T, inward=inward),
-        band=band,
-        counts=used,
-        slope_error=_slope_error(Z, X, D, normal, band, used),
-    )
+    return W, used, inward, normal, _slope_error(Z, X, D, normal, band, used)
+
+
+def _stack_rows(parts: list, k: int, n: int) -> sp.csr_matrix:
+    """The rows of the chunks, shape (k, n), in one CSR matrix (columns sorted in each row)."""
+    nnz = sum(p.nnz for p in parts)
+    index = np.int32 if max(n, nnz) < 2**31 else np.int64
+    indptr = np.zeros(k + 1, dtype=index)
+    data = np.empty(nnz)
+    indices = np.empty(nnz, dtype=index)
+    row = at = 0
+    for p in parts:
+        rows = p.shape[0]
+        indptr[row + 1 : row + rows + 1] = p.indptr[1:] + at
+        data[at : at + p.nnz] = p.data
+        indices[at : at + p.nnz] = p.indices
+        row, at = row + rows, at + p.nnz
+    return sp.csr_matrix((data, indices, indptr), shape=(k, n))
+
+
+def _rows_of(chunks: list, empty_shape: tuple, dtype=np.float64) -> np.ndarray:
+    """The chunks' arrays stacked along their first axis (an empty one of no chunks)."""
+    return np.concatenate(chunks) if chunks else np.zeros(empty_shape, dtype=dtype)
 
 
 def _slope_error(Z, X, D, normal, band: float, used: np.ndarray) -> np.ndarray:
