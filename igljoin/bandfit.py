@@ -374,7 +374,7 @@ def band_fit(
         normal.append(fit[3])
         slope_error.append(fit[4])
     return BandFit(
-        weights=_stack_rows(parts, k, n),
+        weights=sp.vstack(parts, format="csr") if parts else sp.csr_matrix((0, n)),
         frames=SeamFrames(
             normal=_rows_of(normal, (0, 3)),
             tangent=T,
@@ -480,23 +480,6 @@ def _chunk_fit(V, idx, valid, D, curve, T, g0, n0, band: float, along: float):
     normal = unit(np.cross(inward, T))
     normal[np.einsum("ij,ij->i", normal, n0) < 0] *= -1.0
     return W, used, inward, normal, _slope_error(Z, X, D, normal, band, used)
-
-
-def _stack_rows(parts: list, k: int, n: int) -> sp.csr_matrix:
-    """The rows of the chunks, shape (k, n), in one CSR matrix (columns sorted in each row)."""
-    nnz = sum(p.nnz for p in parts)
-    index = np.int32 if max(n, nnz) < 2**31 else np.int64
-    indptr = np.zeros(k + 1, dtype=index)
-    data = np.empty(nnz)
-    indices = np.empty(nnz, dtype=index)
-    row = at = 0
-    for p in parts:
-        rows = p.shape[0]
-        indptr[row + 1 : row + rows + 1] = p.indptr[1:] + at
-        data[at : at + p.nnz] = p.data
-        indices[at : at + p.nnz] = p.indices
-        row, at = row + rows, at + p.nnz
-    return sp.csr_matrix((data, indices, indptr), shape=(k, n))
 
 
 def _rows_of(chunks: list, empty_shape: tuple, dtype=np.float64) -> np.ndarray:
