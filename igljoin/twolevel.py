@@ -126,7 +126,13 @@ def rigid_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
     -------
     scipy.sparse.csr_matrix, shape (3 m, 6 a)
     """
-    a, _, r, radius = _about_centroids(X, labels)
+    a = int(labels.max()) + 1
+    return _cluster_columns(_rigid_blocks(X, labels), labels, a)
+
+
+def _rigid_blocks(X: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """Every vertex's six rigid-motion rows (m, 3, 6) of :func:`rigid_prolongation`."""
+    _, _, r, radius = _about_centroids(X, labels)
     r = r / np.maximum(radius[labels], 1e-300)[:, None]
     blocks = np.zeros((len(X), 3, 6))
     blocks[:, 0, 0] = blocks[:, 1, 1] = blocks[:, 2, 2] = 1.0
@@ -134,7 +140,7 @@ def rigid_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
     blocks[:, 0, 4], blocks[:, 0, 5] = r[:, 2], -r[:, 1]
     blocks[:, 1, 3], blocks[:, 1, 5] = -r[:, 2], r[:, 0]
     blocks[:, 2, 3], blocks[:, 2, 4] = r[:, 1], -r[:, 0]
-    return _cluster_columns(blocks, labels, a)
+    return blocks
 
 
 def _about_centroids(X: np.ndarray, labels: np.ndarray):
@@ -150,11 +156,12 @@ def _about_centroids(X: np.ndarray, labels: np.ndarray):
 def _cluster_columns(blocks: np.ndarray, labels: np.ndarray, a: int) -> sp.csr_matrix:
     """Per-vertex blocks (m, 3, w) placed in their cluster's ``w`` columns: (3 m, w a)."""
     m, _, w = blocks.shape
-    rows = np.broadcast_to(
-        3 * np.arange(m)[:, None, None] + np.arange(3)[None, :, None], blocks.shape
-    )
+    # one row per coordinate, its w entries in the cluster's columns (ascending)
     cols = np.broadcast_to(w * labels[:, None, None] + np.arange(w)[None, None, :], blocks.shape)
-    return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * m, w * a))
+    indptr = np.arange(0, 3 * m * w + 1, w, dtype=np.int64)
+    return sp.csr_matrix(
+        (np.ascontiguousarray(blocks).ravel(), cols.ravel(), indptr), shape=(3 * m, w * a)
+    )
 
 
 def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
@@ -182,9 +189,16 @@ def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
         Columns ``3 j .. 3 j + 2``: cluster ``j``'s ``n u²``, ``n u v``,
         ``n v²``; vertex-major rows.
     """
+    a = int(labels.max()) + 1
+    return _cluster_columns(_bending_blocks(X, labels), labels, a)
+
+
+def _bending_blocks(X: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """Every vertex's three bending rows (m, 3, 3) of :func:`bending_prolongation`."""
     a, count, r, radius = _about_centroids(X, labels)
-    cov = np.zeros((a, 3, 3))
-    np.add.at(cov, labels, r[:, :, None] * r[:, None, :])
+    outer = (r[:, :, None] * r[:, None, :]).reshape(-1, 9)
+    cov = np.stack([np.bincount(labels, outer[:, k], minlength=a) for k in range(9)], 1)
+    cov = cov.reshape(a, 3, 3)
     _, vec = np.linalg.eigh(cov)  # ascending: vec[:, :, 0] the normal
     r = r / np.maximum(radius[labels], 1e-300)[:, None]
     frame = vec[labels]
@@ -196,8 +210,12 @@ def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
         np.stack([np.bincount(labels, shapes[:, k], minlength=a) for k in range(3)], 1)
         / count[:, None]
     )[labels]
-    blocks = normal[:, :, None] * shapes[:, None, :]  # (m, 3, 3): coordinate, shape
-    return _cluster_columns(blocks, labels, a)
+    return normal[:, :, None] * shapes[:, None, :]  # (m, 3, 3): coordinate, shape
+
+
+def _offsets(mats: list) -> list:
+    """Entries before each of the stacked matrices ``mats``."""
+    return list(np.cumsum([0] + [J.nnz for J in mats[:-1]]))
 
 
 class TwoLevelModel:
@@ -275,6 +293,7 @@ class TwoLevelModel:
         self.rebuild_angle = None if rebuild_angle is None else float(rebuild_angle)
         self.free_dofs = dofs(solver.free)
         self.labels = None
+        self._cache = {}
         self.built_rotations = None
         self.factorizations = 0
         self.seconds = {"clusters": 0.0, "model": 0.0, "coarse": 0.0, "factor": 0.0}
@@ -306,24 +325,19 @@ class TwoLevelModel:
             # other terms' block connects the mesh just as well
             graph = ls.factor.Qff if ls.wide is None else ls.factor.Sff
             self.labels = clusters(X, graph, self.cluster_size)
+            self._vertex_labels = np.full(ls.n, -1, dtype=np.int64)
+            self._vertex_labels[ls.free] = self.labels
         t1 = time.perf_counter()
-        self.factors = gauss_newton_factors(ls.terms, state, ls.n)
+        self.factors = gauss_newton_factors(ls.terms, state, ls.n, self._cache)
         t2 = time.perf_counter()
-        A = rigid_prolongation(X, self.labels)
+        blocks = _rigid_blocks(X, self.labels)
         if self.bending:
-            A = sp.hstack([A, bending_prolongation(X, self.labels)], format="csr")
-        A = A.tocoo()
-        # the same columns on all 3n coordinates (zero rows at the fixed vertices)
-        full = sp.csr_matrix((A.data, (self.free_dofs[A.row], A.col)), shape=(3 * ls.n, A.shape[1]))
-        # Σ s (J A)ᵀ diag(w) (J A) as one product over the stacked factors
-        J = sp.vstack([f[0] for f in self.factors], format="csr")
-        w = np.concatenate([sign * wf for _, wf, sign in self.factors])
-        JA = J @ full
-        Ac = sp.csr_matrix(JA.T @ (sp.diags(w) @ JA))
-        Ac = Ac + _RIDGE * Ac.diagonal().mean() * sp.eye(A.shape[1])
-        t3 = time.perf_counter()
-        self.A = A.tocsr()
+            blocks = np.concatenate([blocks, _bending_blocks(X, self.labels)], axis=2)
+        a = int(self.labels.max()) + 1
+        self.A = _cluster_columns(blocks, self.labels, a)
         self.At = sp.csr_matrix(self.A.T)
+        Ac = self._project(blocks, a)
+        t3 = time.perf_counter()
         self.coarse_factor = FixedQuadratic(Ac, np.zeros(0, dtype=np.int64), ls.linear_solver)
         self.factorizations += 1
         if state.rotations is not None:
@@ -332,6 +346,48 @@ class TwoLevelModel:
         for key, dt in zip(self.seconds, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
             self.seconds[key] += dt
         return first
+
+    def _project(self, blocks: np.ndarray, a: int) -> sp.csr_matrix:
+        """``A_c = Aᵀ H A`` from the factors, plus the ridge; shape (w a, w a).
+
+        The patterns of the factors and of ``A_c`` are found at the first
+        build (and again only if a factor's pattern changed); a rebuild
+        recomputes values only (:func:`igljoin.coarse_kernels.project`).
+        """
+        from . import coarse_kernels as ck
+
+        mats = [sp.csr_matrix(J) for J, _, _ in self.factors]
+        pattern = getattr(self, "_pattern", None)
+        same = pattern is not None and len(pattern[0]) == len(mats)
+        same = same and all(
+            np.array_equal(J.indptr, p) and np.array_equal(J.indices, i)
+            for J, p, i in zip(mats, pattern[0], pattern[1])
+        )
+        if not same:
+            indptr = np.concatenate(
+                [[0]] + [J.indptr[1:] + off for J, off in zip(mats, _offsets(mats))]
+            ).astype(np.int64)
+            indices = np.concatenate([J.indices for J in mats]).astype(np.int64)
+            ptr, members, slot = ck.row_clusters(indptr, indices, self._vertex_labels)
+            bptr, bcols, pair_ptr, pair_block = ck.block_pattern(ptr, members, a)
+            self._pattern = (
+                [J.indptr.copy() for J in mats],
+                [J.indices.copy() for J in mats],
+                (indptr, indices, ptr, slot, pair_ptr, pair_block, bptr, bcols),
+            )
+        indptr, indices, ptr, slot, pair_ptr, pair_block, bptr, bcols = self._pattern[2]
+        data = np.concatenate([J.data for J in mats]).astype(np.float64)
+        weights = np.concatenate(
+            [sign * np.asarray(wf, np.float64) for _, wf, sign in self.factors]
+        )
+        w = blocks.shape[2]
+        B = np.zeros((self.solver.n, 3, w))
+        B[self.solver.free] = blocks
+        out = np.zeros((len(bcols), w, w))
+        ck.project(indptr, indices, data, weights, ptr, slot, pair_ptr, pair_block, B, out)
+        Ac = sp.bsr_matrix((out, bcols, bptr), shape=(w * a, w * a)).tocsr()
+        Ac.setdiag(Ac.diagonal() + _RIDGE * Ac.diagonal().mean())
+        return Ac
 
     def _coarse(self, v: np.ndarray) -> np.ndarray:
         """``A A_c⁻¹ Aᵀ v`` for ``v`` of shape (3 n_free,)."""
