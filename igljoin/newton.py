@@ -155,7 +155,7 @@ def _rotation_factor(term: ShapeTerm, state: LocalState, cache: dict) -> sp.csr_
             for a in range(3):
                 cols[start + a] = 3 * L.indices + a
         cache[key] = (
-            L,
+            (L.indptr.astype(np.int64), L.indices.astype(np.int64), L.data),
             E,
             np.ascontiguousarray(term.rest_edges, dtype=np.float64),
             np.ascontiguousarray(term.delta, dtype=np.float64),
@@ -167,8 +167,8 @@ def _rotation_factor(term: ShapeTerm, state: LocalState, cache: dict) -> sp.csr_
     L, E, rest, delta, own_own, own_other, cols, indptr = cache[key]
     R = np.ascontiguousarray(state.rotations, dtype=np.float64)
     data = rotation_factor(
-        L.indptr.astype(np.int64), L.indices.astype(np.int64), L.data, R, delta, E, rest,
-        own_own, own_other, float(term.weight), float(ROTATION_REGULARISATION),
+        *L, R, delta, E, rest, own_own, own_other, float(term.weight),
+        float(ROTATION_REGULARISATION),
     )  # fmt: skip
     return sp.csr_matrix((data, cols, indptr), shape=(3 * term.n, 3 * term.n))
 

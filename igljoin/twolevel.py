@@ -38,7 +38,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from .linsolve import FixedQuadratic
+from .errors import SolveError
+from .linsolve import _NOT_FACTORED, FixedQuadratic, available_backends
 from .newton import dofs, gauss_newton_factors
 
 __all__ = ["clusters", "rigid_prolongation", "bending_prolongation", "TwoLevelModel"]
@@ -213,6 +214,67 @@ def _bending_blocks(X: np.ndarray, labels: np.ndarray) -> np.ndarray:
     return normal[:, :, None] * shapes[:, None, :]  # (m, 3, 3): coordinate, shape
 
 
+class _CoarseFactor:
+    """Pardiso's factorization of ``A_c`` whose analysis is reused for new values.
+
+    Parameters
+    ----------
+    Ac : scipy.sparse.csr_matrix, shape (k, k)
+        Symmetric positive definite, sorted indices, every diagonal entry
+        stored.
+
+    Attributes
+    ----------
+    Qff : scipy.sparse.csr_matrix, shape (k, k)
+        The matrix factored (as :class:`igljoin.linsolve.FixedQuadratic`
+        names it).
+    backend : str
+    """
+
+    backend = "pardiso"
+
+    def __init__(self, Ac: sp.csr_matrix):
+        from .linsolve import _Pardiso, _PardisoError
+
+        self.Qff = Ac
+        self._pattern = (Ac.indptr.copy(), Ac.indices.copy())
+        rows = np.repeat(np.arange(Ac.shape[0]), np.diff(Ac.indptr))
+        self._upper = Ac.indices >= rows
+        try:
+            self._pardiso = _Pardiso(Ac)
+        except _PardisoError as exc:
+            raise SolveError(_NOT_FACTORED) from exc
+        # Pardiso keeps the sorted upper triangle, every diagonal entry stored: the same
+        # entries in the same order when A_c stores its diagonal (else no reuse)
+        self._reusable = len(self._pardiso.a) == int(self._upper.sum())
+
+    def refactor(self, Ac: sp.csr_matrix) -> bool:
+        """Factor the new values of the same pattern; ``False`` if the pattern differs."""
+        from .linsolve import _pardiso_call, _PardisoError
+
+        same = (
+            self._reusable
+            and np.array_equal(Ac.indptr, self._pattern[0])
+            and np.array_equal(Ac.indices, self._pattern[1])
+        )
+        if not same:
+            return False
+        p = self._pardiso
+        p.a[:] = Ac.data[self._upper]
+        one = np.zeros(1)
+        try:
+            _pardiso_call(p.lib, p.itype, p.pt, p.iparm, 22, p.n, p.a, p.ia, p.ja, 1, one,
+                          one.copy(), p.mtype)  # fmt: skip
+        except _PardisoError as exc:
+            raise SolveError(_NOT_FACTORED) from exc
+        self.Qff = Ac
+        return True
+
+    def solve_free(self, b: np.ndarray) -> np.ndarray:
+        """``A_c⁻¹ b`` for ``b`` of shape (k, m); returns shape (k, m)."""
+        return np.ascontiguousarray(self._pardiso.solve(b))
+
+
 def _offsets(mats: list) -> list:
     """Entries before each of the stacked matrices ``mats``."""
     return list(np.cumsum([0] + [J.nnz for J in mats[:-1]]))
@@ -285,12 +347,17 @@ class TwoLevelModel:
         balancing: bool = False,
         bending: bool = False,
         rebuild_angle: float | None = None,
+        max_rebuilds: int | None = None,
+        first_rebuild: int = 1,
     ):
         self.solver = solver
         self.cluster_size = int(cluster_size)
         self.balancing = bool(balancing)
         self.bending = bool(bending)
         self.rebuild_angle = None if rebuild_angle is None else float(rebuild_angle)
+        self.max_rebuilds = None if max_rebuilds is None else int(max_rebuilds)
+        self.first_rebuild = int(first_rebuild)
+        self.built_at = []
         self.free_dofs = dofs(solver.free)
         self.labels = None
         self._cache = {}
@@ -314,8 +381,15 @@ class TwoLevelModel:
         quasi-Newton memory, of which there is none yet).
         """
         first = self.labels is None
-        if not first and (self.rebuild_angle is None or self.turned(state) <= self.rebuild_angle):
-            return False
+        if not first:
+            if (
+                self.rebuild_angle is None
+                or iteration < self.first_rebuild
+                or (self.max_rebuilds is not None and self.factorizations > self.max_rebuilds)
+            ):
+                return False
+            if self.turned(state) <= self.rebuild_angle:
+                return False
         ls = self.solver
         t0 = time.perf_counter()
         X = state.X[ls.free]
@@ -338,14 +412,34 @@ class TwoLevelModel:
         self.At = sp.csr_matrix(self.A.T)
         Ac = self._project(blocks, a)
         t3 = time.perf_counter()
-        self.coarse_factor = FixedQuadratic(Ac, np.zeros(0, dtype=np.int64), ls.linear_solver)
+        self.coarse_factor = self._factor(Ac)
         self.factorizations += 1
+        self.built_at.append(int(iteration))
         if state.rotations is not None:
             self.built_rotations = state.rotations[ls.free].copy()
         t4 = time.perf_counter()
         for key, dt in zip(self.seconds, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
             self.seconds[key] += dt
         return first
+
+    def _factor(self, Ac: sp.csr_matrix):
+        """Factor ``A_c``: Pardiso reusing its first analysis when it may be used.
+
+        ``A_c``'s pattern is the same at every build, so the fill-reducing
+        order and the symbolic factorization of the first build serve all
+        rebuilds: only the numeric factorization is redone (at 40k guest
+        vertices 0.17 s against 0.59 s for a whole Pardiso factorization and
+        2.7 s for cholespy's). Without Pardiso (or with ``linear_solver``
+        ``"igl"`` or ``"cholespy"`` asked for), the solver's backend factors
+        it anew.
+        """
+        ls = self.solver
+        if ls.linear_solver not in ("auto", "pardiso") or "pardiso" not in available_backends():
+            return FixedQuadratic(Ac, np.zeros(0, dtype=np.int64), ls.linear_solver)
+        factor = getattr(self, "coarse_factor", None)
+        if isinstance(factor, _CoarseFactor) and factor.refactor(Ac):
+            return factor
+        return _CoarseFactor(Ac)
 
     def _project(self, blocks: np.ndarray, a: int) -> sp.csr_matrix:
         """``A_c = Aᵀ H A`` from the factors, plus the ridge; shape (w a, w a).
