@@ -16,7 +16,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-__all__ = ["row_clusters", "block_pattern", "project", "rotation_factor"]
+__all__ = ["row_clusters", "pair_keys", "block_pattern", "project", "rotation_factor"]
 
 
 @nb.njit(cache=True)
@@ -72,7 +72,22 @@ def row_clusters(indptr, indices, labels):
 
 
 @nb.njit(cache=True)
-def _pair_keys(ptr, clusters, a):
+def pair_keys(ptr, clusters, a):
+    """Every row's cluster pairs ``(k, l)`` (``k``-major) as keys ``k a + l``.
+
+    Parameters
+    ----------
+    ptr, clusters : ndarray of int64
+        From :func:`row_clusters`.
+    a : int
+        Number of clusters.
+
+    Returns
+    -------
+    keys : ndarray of int64
+    pair_ptr : ndarray of int64, shape (r + 1,)
+        Row ``i``'s pairs are ``keys[pair_ptr[i]:pair_ptr[i + 1]]``.
+    """
     total = 0
     for r in range(len(ptr) - 1):
         q = ptr[r + 1] - ptr[r]
@@ -89,13 +104,13 @@ def _pair_keys(ptr, clusters, a):
     return keys, pair_ptr
 
 
-def block_pattern(ptr: np.ndarray, clusters: np.ndarray, a: int):
-    """The (w, w) blocks of ``A_c`` the rows reach, and where each row's pairs go.
+def block_pattern(keys: list, a: int):
+    """The (w, w) blocks of ``A_c`` the rows of all factors reach, and each pair's block.
 
     Parameters
     ----------
-    ptr, clusters : ndarray of int64
-        From :func:`row_clusters`.
+    keys : list of ndarray of int64
+        Every factor's pair keys (:func:`pair_keys`).
     a : int
         Number of clusters.
 
@@ -103,18 +118,14 @@ def block_pattern(ptr: np.ndarray, clusters: np.ndarray, a: int):
     -------
     indptr, indices : ndarray of int64, shape (a + 1,) and (b,)
         Block-CSR pattern of ``A_c`` (ascending columns per block row).
-    pair_ptr : ndarray of int64, shape (r + 1,)
-        Row ``i``'s cluster pairs ``(k, l)`` (``k``-major) are entries
-        ``pair_ptr[i] ..`` of ``pair_block``.
-    pair_block : ndarray of int64
-        Block of every row's pair.
+    blocks_of : list of ndarray of int64
+        The block of every pair, per factor.
     """
-    keys, pair_ptr = _pair_keys(ptr, clusters, int(a))
-    unique, pair_block = np.unique(keys, return_inverse=True)
-    brow = unique // a
+    unique = np.unique(np.concatenate(keys)) if keys else np.zeros(0, dtype=np.int64)
     indptr = np.zeros(a + 1, dtype=np.int64)
-    np.add.at(indptr, brow + 1, 1)
-    return np.cumsum(indptr), unique % a, pair_ptr, pair_block.astype(np.int64).ravel()
+    np.add.at(indptr, unique // a + 1, 1)
+    blocks_of = [np.searchsorted(unique, k).astype(np.int64) for k in keys]
+    return np.cumsum(indptr), unique % a, blocks_of
 
 
 @nb.njit(cache=True)
@@ -129,7 +140,9 @@ def project(indptr, indices, data, weights, ptr, slot, pair_ptr, pair_block, B, 
         Signed row weights ``s w``.
     ptr, slot : ndarray of int64
         From :func:`row_clusters`.
-    pair_ptr, pair_block : ndarray of int64
+    pair_ptr : ndarray of int64
+        From :func:`pair_keys`.
+    pair_block : ndarray of int64
         From :func:`block_pattern`.
     B : ndarray, shape (n, 3, w)
         Every vertex's motions (any values at a fixed vertex: never read).

@@ -37,6 +37,7 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse import get_index_dtype
 
 from .linsolve import FixedQuadratic
 from .terms import ROTATION_REGULARISATION, LocalState, ShapeTerm, SmoothJoinTerm, StretchTerm
@@ -82,6 +83,9 @@ def _kron3(K: sp.spmatrix, H: np.ndarray | None = None, cache: dict | None = Non
         cols = (3 * K.indices[:, None] + np.arange(3)[None, :]).reshape(-1)
         indptr = 3 * K.indptr
         shape = (K.shape[0], 3 * K.shape[1])
+        if cache is not None:
+            # the index type scipy would convert them to on every call
+            cols, indptr = _index_arrays(cols, indptr, shape)
         if H is None:
             out = sp.csr_matrix(sp.kron(K, sp.eye(3), format="csr"))
             if cache is not None:
@@ -91,6 +95,12 @@ def _kron3(K: sp.spmatrix, H: np.ndarray | None = None, cache: dict | None = Non
             cache[key] = (rows, Kdata, cols, indptr, shape)
     data = (Kdata[:, None] * H[rows]).reshape(-1)
     return sp.csr_matrix((data, cols, indptr), shape=shape)
+
+
+def _index_arrays(cols: np.ndarray, indptr: np.ndarray, shape: tuple) -> tuple:
+    """CSR index arrays in the integer type scipy picks for them (no conversion per use)."""
+    kind = get_index_dtype((cols, indptr), maxval=max(shape[0], shape[1], len(cols)))
+    return cols.astype(kind), indptr.astype(kind)
 
 
 def _shape_factors(term: ShapeTerm, state: LocalState, cache: dict | None = None) -> list:
@@ -154,6 +164,7 @@ def _rotation_factor(term: ShapeTerm, state: LocalState, cache: dict) -> sp.csr_
             )
             for a in range(3):
                 cols[start + a] = 3 * L.indices + a
+        cols, indptr = _index_arrays(cols, indptr, (3 * n, 3 * n))
         cache[key] = (
             (L.indptr.astype(np.int64), L.indices.astype(np.int64), L.data),
             E,
@@ -181,11 +192,10 @@ def _stretch_factors(term: StretchTerm, state: LocalState, cache: dict | None = 
     # k (u uᵀ + s (I − u uᵀ)) = k u uᵀ + k s Σ_c p_c p_cᵀ with p_c the rows of I − u uᵀ
     proj = np.eye(3)[None] - u[:, :, None] * u[:, None, :]
     K = term.K
-    J = sp.vstack(
-        [_kron3(K, u, cache)] + [_kron3(K, proj[:, c], cache) for c in range(3)], format="csr"
-    )
-    w = np.concatenate([term.weights] + [term.weights * across] * 3)
-    return [(J, w, 1.0)]
+    across = term.weights * across
+    return [(_kron3(K, u, cache), term.weights, 1.0)] + [
+        (_kron3(K, proj[:, c], cache), across, 1.0) for c in range(3)
+    ]
 
 
 def _smooth_factors(term: SmoothJoinTerm, state: LocalState, cache: dict | None = None) -> list:

@@ -275,11 +275,6 @@ class _CoarseFactor:
         return np.ascontiguousarray(self._pardiso.solve(b))
 
 
-def _offsets(mats: list) -> list:
-    """Entries before each of the stacked matrices ``mats``."""
-    return list(np.cumsum([0] + [J.nnz for J in mats[:-1]]))
-
-
 class TwoLevelModel:
     """``P⁻¹`` with a coarse Gauss–Newton correction, as the quasi-Newton initial inverse Hessian.
 
@@ -458,27 +453,28 @@ class TwoLevelModel:
             for J, p, i in zip(mats, pattern[0], pattern[1])
         )
         if not same:
-            indptr = np.concatenate(
-                [[0]] + [J.indptr[1:] + off for J, off in zip(mats, _offsets(mats))]
-            ).astype(np.int64)
-            indices = np.concatenate([J.indices for J in mats]).astype(np.int64)
-            ptr, members, slot = ck.row_clusters(indptr, indices, self._vertex_labels)
-            bptr, bcols, pair_ptr, pair_block = ck.block_pattern(ptr, members, a)
+            # per factor: the clusters each row reaches and its cluster pairs' keys; the
+            # blocks of A_c are their union
+            rows = [ck.row_clusters(J.indptr, J.indices, self._vertex_labels) for J in mats]
+            keys = [ck.pair_keys(ptr, members, a) for ptr, members, _ in rows]
+            bptr, bcols, blocks_of = ck.block_pattern([k for k, _ in keys], a)
             self._pattern = (
                 [J.indptr.copy() for J in mats],
                 [J.indices.copy() for J in mats],
-                (indptr, indices, ptr, slot, pair_ptr, pair_block, bptr, bcols),
+                [(r[0], r[2], k[1], b) for r, k, b in zip(rows, keys, blocks_of)],
+                (bptr, bcols),
             )
-        indptr, indices, ptr, slot, pair_ptr, pair_block, bptr, bcols = self._pattern[2]
-        data = np.concatenate([J.data for J in mats]).astype(np.float64)
-        weights = np.concatenate(
-            [sign * np.asarray(wf, np.float64) for _, wf, sign in self.factors]
-        )
+        bptr, bcols = self._pattern[3]
         w = blocks.shape[2]
         B = np.zeros((self.solver.n, 3, w))
         B[self.solver.free] = blocks
         out = np.zeros((len(bcols), w, w))
-        ck.project(indptr, indices, data, weights, ptr, slot, pair_ptr, pair_block, B, out)
+        for (J, wf, sign), (ptr, slot, pair_ptr, pair_block) in zip(self.factors, self._pattern[2]):
+            J = sp.csr_matrix(J)
+            weights = sign * np.asarray(wf, dtype=np.float64)
+            ck.project(
+                J.indptr, J.indices, J.data, weights, ptr, slot, pair_ptr, pair_block, B, out
+            )
         Ac = sp.bsr_matrix((out, bcols, bptr), shape=(w * a, w * a)).tocsr()
         Ac.setdiag(Ac.diagonal() + _RIDGE * Ac.diagonal().mean())
         return Ac

@@ -117,7 +117,7 @@ def table(kind: str, sizes: list) -> None:
 
 
 #: The model ``time`` compares with ``P``.
-TIMED = dict(bending=True, rebuild_angle=0.2)
+TIMED = dict(bending=True, rebuild_angle=0.2, first_rebuild=6)
 
 
 def timed(kind: str, sizes: list) -> None:
@@ -238,7 +238,7 @@ def main(argv: list) -> None:
     for arg in [a for a in argv if "=" in a]:
         key, value = arg.split("=")
         TIMED[key] = None if value == "None" else float(value)
-        if key == "cluster_size":
+        if key in ("cluster_size", "first_rebuild", "max_rebuilds") and value != "None":
             TIMED[key] = int(TIMED[key])
     argv = [a for a in argv if "=" not in a]
     what, kind, sizes = argv[0], argv[1], [float(v) for v in argv[2:]]
