@@ -42,7 +42,15 @@ from .errors import SolveError
 from .linsolve import _NOT_FACTORED, FixedQuadratic, available_backends
 from .newton import dofs, gauss_newton_factors
 
-__all__ = ["clusters", "rigid_prolongation", "bending_prolongation", "TwoLevelModel"]
+__all__ = [
+    "clusters",
+    "rigid_prolongation",
+    "bending_prolongation",
+    "TwoLevelModel",
+    "preferred_model",
+    "AUTO_FROM_VERTICES",
+    "AUTO_MODEL",
+]
 
 # relative ridge added to the coarse matrix: a cluster of three nearly collinear vertices
 # has a nearly free rotation about their line; 1e-10 of the mean diagonal keeps its
@@ -502,3 +510,43 @@ class TwoLevelModel:
         c = self._coarse(flat)
         z = fine((flat - self._model(c)).reshape(v.shape)).reshape(-1)
         return (c + z - self._coarse(self._model(z))).reshape(v.shape)
+
+
+#: Free guest vertices from which ``preconditioner="auto"`` uses :data:`AUTO_MODEL`
+#: (``pipelines/coarse_study.py time``: below it the coarse set-up costs more than the
+#: iterations it saves).
+AUTO_FROM_VERTICES = 10_000
+
+#: The two-level model ``preconditioner="auto"`` uses from :data:`AUTO_FROM_VERTICES`:
+#: bending motions, rebuilt once a rotation has turned 0.2 rad, never before the sixth
+#: iteration (earlier rebuilds, while the guest still moves far, led the paper's longer
+#: patch to another stationary point, 1 % higher).
+AUTO_MODEL = {"bending": True, "rebuild_angle": 0.2, "first_rebuild": 6}
+
+
+def preferred_model(solver, options):
+    """The quasi-Newton model a join uses for ``options.preconditioner``.
+
+    Parameters
+    ----------
+    solver : LocalGlobalSolver
+        The join's iteration (its free vertices count).
+    options : JoinOptions
+
+    Returns
+    -------
+    TwoLevelModel or None
+        ``None`` (the factored ``P`` alone) for ``"factored"``, for
+        ``acceleration=0`` and for ``"auto"`` below
+        :data:`AUTO_FROM_VERTICES` free vertices; the rigid coarse space
+        built once for ``"two-level"``; :data:`AUTO_MODEL` for ``"auto"``
+        from :data:`AUTO_FROM_VERTICES` on.
+    """
+    choice = options.preconditioner
+    if options.acceleration == 0 or choice == "factored":
+        return None
+    if choice == "two-level":
+        return TwoLevelModel(solver)
+    if len(solver.free) >= AUTO_FROM_VERTICES:
+        return TwoLevelModel(solver, **AUTO_MODEL)
+    return None
