@@ -18,8 +18,9 @@ The coarse matrix ``A_c = Aᵀ H A`` is the model ``H`` projected onto them,
 computed from the model's factored form
 (:func:`igljoin.newton.gauss_newton_factors`) without assembling ``H``, and
 factored (9 a unknowns, a few thousand); both are rebuilt at the current
-iterate when the guest has turned far from where they were built. The
-initial inverse Hessian of the quasi-Newton steps becomes
+iterate when the guest has turned far from where they were built (values
+only: the patterns are the first build's). The initial inverse Hessian of
+the quasi-Newton steps becomes
 
 * additive: ``P⁻¹ + A A_c⁻¹ Aᵀ``, or
 * balancing (``balancing=True``): ``C + (I − C H) P⁻¹ (I − H C)`` with
@@ -304,12 +305,17 @@ class TwoLevelModel:
     inverse Hessian under the same pairs is still a descent model).
 
     The defaults (rigid motions, built once) are what the join option
-    ``preconditioner="two-level"`` uses: with ``bending`` and
+    ``preconditioner="two-level"`` uses; ``"auto"`` uses :data:`AUTO_MODEL`
+    from :data:`AUTO_FROM_VERTICES` free vertices: with ``bending`` and
     ``rebuild_angle=0.2`` the iteration counts are lower still and no longer
-    grow on the patch (36 / 43 at 10k / 100k against 46 / 75), but the
-    rebuilds cost the time they save, and on the paper's longer patch
-    (compressed into its hole) the 24 rebuilds led to another stationary
-    point, 1 % higher in energy (docs/limits.md).
+    grow on the patch (35 / 41 at 10k / 40k against 100 / 228), and on the
+    tube they grow slowly (73 / 203 against 199 / 486). A rebuild computes
+    values only — the patterns of the factors, of ``A_c`` and Pardiso's
+    analysis of ``A_c`` are the first build's — 0.1 s at 10k and 0.5 s at
+    40k guest vertices. Rebuilds in the first iterations, while the guest
+    still moves far, led the paper's longer patch (compressed into its
+    hole) to another stationary point 1 % higher in energy;
+    ``first_rebuild=6`` keeps it at the default's minimum.
 
     Parameters
     ----------
@@ -331,6 +337,10 @@ class TwoLevelModel:
     rebuild_angle : float or None
         Radians a vertex's rotation may turn from its value at the last
         build before the coarse space is rebuilt; ``None``: built once.
+    max_rebuilds : int or None
+        Rebuilds allowed after the first build (``None``: no limit).
+    first_rebuild : int
+        Earliest iteration at which a rebuild is made.
 
     Attributes
     ----------
@@ -338,6 +348,8 @@ class TwoLevelModel:
         Cluster of every free vertex (after the first refresh).
     factorizations : int
         Coarse factorizations made (builds).
+    built_at : list of int
+        Iteration of every build.
     seconds : dict
         ``clusters``, ``model`` (the factored Gauss–Newton model), ``coarse``
         (``Aᵀ H A``) and ``factor`` times, summed over the builds.
