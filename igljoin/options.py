@@ -259,13 +259,14 @@ class JoinOptions:
         and below a few thousand vertices its set-up costs more than it
         saves (docs/limits.md). It preconditions the quasi-Newton steps, so
         it needs ``acceleration`` > 0. ``"auto"``: the factored form below
-        :data:`igljoin.twolevel.AUTO_FROM_VERTICES` free guest vertices,
-        and from there the coarse correction with three bending motions per
-        cluster as well, rebuilt at the current positions whenever the
-        guest has turned 0.2 rad (:data:`igljoin.twolevel.AUTO_MODEL`):
-        fewer iterations on tubes too (203 against 486 on a 40k tube) and
-        less time on both (docs/limits.md); with ``acceleration=0`` it is
-        the factored form.
+        :data:`igljoin.twolevel.AUTO_FROM_VERTICES` (20,000) free guest
+        vertices, and from there the coarse correction with three bending
+        motions per cluster as well, rebuilt at the current positions
+        whenever the guest has turned 0.2 rad
+        (:data:`igljoin.twolevel.AUTO_MODEL`): fewer iterations on tubes
+        too (203 / 230 against 486 / 746 at 40k / 100k) and less time on
+        tubes and patches from 20k on (0.4–0.95 × ``P``'s iteration); with
+        ``acceleration=0`` it is the factored form.
     linear_solver : {"auto", "igl", "cholespy", "pardiso"}
         Sparse Cholesky backend of the global step: libigl's
         ``min_quad_with_fixed`` (always available), cholespy (the

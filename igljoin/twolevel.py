@@ -308,8 +308,9 @@ class TwoLevelModel:
     ``preconditioner="two-level"`` uses; ``"auto"`` uses :data:`AUTO_MODEL`
     from :data:`AUTO_FROM_VERTICES` free vertices: with ``bending`` and
     ``rebuild_angle=0.2`` the iteration counts are lower still and no longer
-    grow on the patch (35 / 41 at 10k / 40k against 100 / 228), and on the
-    tube they grow slowly (73 / 203 against 199 / 486). A rebuild computes
+    grow on the patch (35 / 30 / 41 / 55 at 10k / 20k / 40k / 100k against
+    100 / 134 / 228 / 248), and on the tube they grow more slowly (73 / 162 /
+    203 / 230 against 199 / 342 / 486 / 746). A rebuild computes
     values only — the patterns of the factors, of ``A_c`` and Pardiso's
     analysis of ``A_c`` are the first build's — 0.1 s at 10k and 0.5 s at
     40k guest vertices. Rebuilds in the first iterations, while the guest
@@ -525,9 +526,10 @@ class TwoLevelModel:
 
 
 #: Free guest vertices from which ``preconditioner="auto"`` uses :data:`AUTO_MODEL`
-#: (``pipelines/coarse_study.py time``: below it the coarse set-up costs more than the
-#: iterations it saves).
-AUTO_FROM_VERTICES = 10_000
+#: (``pipelines/coarse_study.py time``, one BLAS thread: at 10k the tube's iteration took
+#: as long with it as with ``P`` alone, the patch's 0.6-1.1 times as long; at 20k 0.9-0.95
+#: and 0.6 times, at 40k 0.7 and 0.4, at 100k 0.7 and 0.6).
+AUTO_FROM_VERTICES = 20_000
 
 #: The two-level model ``preconditioner="auto"`` uses from :data:`AUTO_FROM_VERTICES`:
 #: bending motions, rebuilt once a rotation has turned 0.2 rad, never before the sixth
