@@ -73,7 +73,7 @@ def row_clusters(indptr, indices, labels):
 
 @nb.njit(cache=True)
 def pair_keys(ptr, clusters, a):
-    """Every row's cluster pairs ``(k, l)`` (``k``-major) as keys ``k a + l``.
+    """Every row's cluster pairs ``(k, l)``, ``k ≤ l`` (``k``-major), as keys ``k a + l``.
 
     Parameters
     ----------
@@ -91,13 +91,13 @@ def pair_keys(ptr, clusters, a):
     total = 0
     for r in range(len(ptr) - 1):
         q = ptr[r + 1] - ptr[r]
-        total += q * q
+        total += q * (q + 1) // 2
     keys = np.empty(total, dtype=np.int64)
     pair_ptr = np.zeros(len(ptr), dtype=np.int64)
     t = 0
     for r in range(len(ptr) - 1):
         for i in range(ptr[r], ptr[r + 1]):
-            for j in range(ptr[r], ptr[r + 1]):
+            for j in range(i, ptr[r + 1]):
                 keys[t] = clusters[i] * a + clusters[j]
                 t += 1
         pair_ptr[r + 1] = t
@@ -110,27 +110,38 @@ def block_pattern(keys: list, a: int):
     Parameters
     ----------
     keys : list of ndarray of int64
-        Every factor's pair keys (:func:`pair_keys`).
+        Every factor's upper pair keys (:func:`pair_keys`).
     a : int
         Number of clusters.
 
     Returns
     -------
     indptr, indices : ndarray of int64, shape (a + 1,) and (b,)
-        Block-CSR pattern of ``A_c`` (ascending columns per block row).
+        Block-CSR pattern of ``A_c``, both triangles (ascending columns per
+        block row).
     blocks_of : list of ndarray of int64
         The block of every pair, per factor.
+    lower, upper : ndarray of int64
+        Every block below the diagonal and the block above it that is its
+        transpose.
     """
-    unique = np.unique(np.concatenate(keys)) if keys else np.zeros(0, dtype=np.int64)
+    upper_keys = np.unique(np.concatenate(keys)) if keys else np.zeros(0, dtype=np.int64)
+    row, col = upper_keys // a, upper_keys % a
+    off = row != col
+    full = np.unique(np.concatenate([upper_keys, col[off] * a + row[off]]))
     indptr = np.zeros(a + 1, dtype=np.int64)
-    np.add.at(indptr, unique // a + 1, 1)
-    blocks_of = [np.searchsorted(unique, k).astype(np.int64) for k in keys]
-    return np.cumsum(indptr), unique % a, blocks_of
+    np.add.at(indptr, full // a + 1, 1)
+    blocks_of = [np.searchsorted(full, k).astype(np.int64) for k in keys]
+    frow, fcol = full // a, full % a
+    lower = np.flatnonzero(frow > fcol)
+    upper = np.searchsorted(full, fcol[lower] * a + frow[lower])
+    return np.cumsum(indptr), fcol, blocks_of, lower, upper
 
 
 @nb.njit(cache=True)
 def project(indptr, indices, data, weights, ptr, slot, pair_ptr, pair_block, B, blocks):
-    """Add ``Σ_r w_r (J_r A)ᵀ (J_r A)`` into ``blocks`` (b, w, w).
+    """Add ``Σ_r w_r (J_r A)ᵀ (J_r A)`` into ``blocks`` (b, w, w): the blocks on and above
+    the diagonal only (the caller copies the transposes below it).
 
     Parameters
     ----------
@@ -171,7 +182,7 @@ def project(indptr, indices, data, weights, ptr, slot, pair_ptr, pair_block, B, 
                 JA[s, k] += x * B[v, c, k]
         t = pair_ptr[r]
         for i in range(q):
-            for j in range(q):
+            for j in range(i, q):
                 b = pair_block[t]
                 t += 1
                 for k in range(w):

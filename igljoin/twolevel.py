@@ -478,14 +478,14 @@ class TwoLevelModel:
             # blocks of A_c are their union
             rows = [ck.row_clusters(J.indptr, J.indices, self._vertex_labels) for J in mats]
             keys = [ck.pair_keys(ptr, members, a) for ptr, members, _ in rows]
-            bptr, bcols, blocks_of = ck.block_pattern([k for k, _ in keys], a)
+            bptr, bcols, blocks_of, lower, upper = ck.block_pattern([k for k, _ in keys], a)
             self._pattern = (
                 [J.indptr.copy() for J in mats],
                 [J.indices.copy() for J in mats],
                 [(r[0], r[2], k[1], b) for r, k, b in zip(rows, keys, blocks_of)],
-                (bptr, bcols),
+                (bptr, bcols, lower, upper),
             )
-        bptr, bcols = self._pattern[3]
+        bptr, bcols, lower, upper = self._pattern[3]
         w = blocks.shape[2]
         B = np.zeros((self.solver.n, 3, w))
         B[self.solver.free] = blocks
@@ -496,6 +496,7 @@ class TwoLevelModel:
             ck.project(
                 J.indptr, J.indices, J.data, weights, ptr, slot, pair_ptr, pair_block, B, out
             )
+        out[lower] = out[upper].transpose(0, 2, 1)
         Ac = sp.bsr_matrix((out, bcols, bptr), shape=(w * a, w * a)).tocsr()
         Ac.setdiag(Ac.diagonal() + _RIDGE * Ac.diagonal().mean())
         return Ac
