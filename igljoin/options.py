@@ -265,7 +265,7 @@ class JoinOptions:
         whenever the guest has turned 0.2 rad
         (:data:`igljoin.twolevel.AUTO_MODEL`): fewer iterations on tubes
         too (203 / 230 against 486 / 746 at 40k / 100k) and less time on
-        tubes and patches from 20k on (0.4–0.95 × ``P``'s iteration); with
+        tubes and patches from 20k on (0.4–0.96 × ``P``'s iteration); with
         ``acceleration=0`` it is the factored form.
     linear_solver : {"auto", "igl", "cholespy", "pardiso"}
         Sparse Cholesky backend of the global step: libigl's

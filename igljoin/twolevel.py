@@ -527,9 +527,9 @@ class TwoLevelModel:
 
 
 #: Free guest vertices from which ``preconditioner="auto"`` uses :data:`AUTO_MODEL`
-#: (``pipelines/coarse_study.py time``, one BLAS thread: at 10k the tube's iteration took
-#: as long with it as with ``P`` alone, the patch's 0.6-1.1 times as long; at 20k 0.9-0.95
-#: and 0.6 times, at 40k 0.7 and 0.4, at 100k 0.7 and 0.6).
+#: (``pipelines/coarse_study.py time``, one BLAS thread, the iteration's seconds with it
+#: over those with ``P`` alone: tube / patch 0.9-1.1 / 0.7-1.2 at 10k, 0.90-0.96 / 0.55-0.63
+#: at 20k, 0.69-0.96 / 0.40-0.42 at 40k, 0.71 / 0.51-0.58 at 100k).
 AUTO_FROM_VERTICES = 20_000
 
 #: The two-level model ``preconditioner="auto"`` uses from :data:`AUTO_FROM_VERTICES`:
