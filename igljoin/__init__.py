@@ -64,11 +64,12 @@ _LAZY = {
 #: as they were when ``import igljoin`` imported everything: every submodule but the
 #: three whose name is a public function (``join``, ``clean``, ``weld``).
 _SUBMODULES = (
-    "atomic", "band_targets", "bandfit", "boundary", "cli", "correspond", "crease", "demo",
-    "errors", "frames", "host_values", "io", "join_terms", "kernels", "linsolve", "measure",
-    "measure_join", "mesh", "metrics", "newton", "options", "outputs", "phantoms", "pipeline",
-    "plain", "polyline", "quality", "result", "rotations", "seam_geometry", "seams", "solve",
-    "spec", "start", "stiffness", "terms", "topology", "twolevel", "validate", "viz",
+    "atomic", "band_targets", "bandfit", "boundary", "cli", "coarse_kernels", "correspond",
+    "crease", "demo", "errors", "frames", "host_values", "io", "join_terms", "kernels",
+    "linsolve", "measure", "measure_join", "mesh", "metrics", "newton", "options", "outputs",
+    "phantoms", "pipeline", "plain", "polyline", "quality", "result", "rotations",
+    "seam_geometry", "seams", "solve", "spec", "start", "stiffness", "terms", "topology",
+    "twolevel", "validate", "viz",
 )  # fmt: skip
 
 __all__ = [

@@ -37,6 +37,7 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse import get_index_dtype
 
 from .linsolve import FixedQuadratic
 from .terms import ROTATION_REGULARISATION, LocalState, ShapeTerm, SmoothJoinTerm, StretchTerm
@@ -63,23 +64,52 @@ def _inertia(c: np.ndarray, w: np.ndarray) -> np.ndarray:
     return out * w[:, None, None]
 
 
-def _kron3(K: sp.spmatrix, H: np.ndarray | None = None) -> sp.csr_matrix:
-    """Rows ``K_r ⊗ m_r`` (one per row, ``H`` of shape (rows, 3)) or ``K ⊗ I₃`` (``H`` None)."""
-    K = sp.csr_matrix(K)
-    if H is None:
-        return sp.csr_matrix(sp.kron(K, sp.eye(3), format="csr"))
-    rows = np.repeat(np.arange(K.shape[0]), np.diff(K.indptr))
-    data = (K.data[:, None] * H[rows]).reshape(-1)
-    cols = (3 * K.indices[:, None] + np.arange(3)[None, :]).reshape(-1)
-    indptr = 3 * K.indptr
-    return sp.csr_matrix((data, cols, indptr), shape=(K.shape[0], 3 * K.shape[1]))
+def _kron3(K: sp.spmatrix, H: np.ndarray | None = None, cache: dict | None = None) -> sp.csr_matrix:
+    """Rows ``K_r ⊗ m_r`` (one per row, ``H`` of shape (rows, 3)) or ``K ⊗ I₃`` (``H`` None).
+
+    With a ``cache`` dict, ``K``'s pattern (and ``K ⊗ I₃`` whole) is kept
+    there and only the values are computed on the next call.
+    """
+    key = (id(K), H is None)
+    if cache is not None and key in cache:
+        hit = cache[key]
+        if H is None:
+            return hit
+        rows, Kdata, cols, indptr, shape = hit
+    else:
+        K = sp.csr_matrix(K)
+        rows = np.repeat(np.arange(K.shape[0]), np.diff(K.indptr))
+        Kdata = K.data
+        cols = (3 * K.indices[:, None] + np.arange(3)[None, :]).reshape(-1)
+        indptr = 3 * K.indptr
+        shape = (K.shape[0], 3 * K.shape[1])
+        if cache is not None:
+            # the index type scipy would convert them to on every call
+            cols, indptr = _index_arrays(cols, indptr, shape)
+        if H is None:
+            out = sp.csr_matrix(sp.kron(K, sp.eye(3), format="csr"))
+            if cache is not None:
+                cache[key] = out
+            return out
+        if cache is not None:
+            cache[key] = (rows, Kdata, cols, indptr, shape)
+    data = (Kdata[:, None] * H[rows]).reshape(-1)
+    return sp.csr_matrix((data, cols, indptr), shape=shape)
 
 
-def _shape_factors(term: ShapeTerm, state: LocalState) -> list:
+def _index_arrays(cols: np.ndarray, indptr: np.ndarray, shape: tuple) -> tuple:
+    """CSR index arrays in the integer type scipy picks for them (no conversion per use)."""
+    kind = get_index_dtype((cols, indptr), maxval=max(shape[0], shape[1], len(cols)))
+    return cols.astype(kind), indptr.astype(kind)
+
+
+def _shape_factors(term: ShapeTerm, state: LocalState, cache: dict | None = None) -> list:
     n = term.n
-    base = (_kron3(term.K), np.repeat(term.weights, 3), 1.0)
+    base = (_kron3(term.K, cache=cache), np.repeat(term.weights, 3), 1.0)
     if not term.rotation_aware:
         return [base]
+    if cache is not None:
+        return [base, (_rotation_factor(term, state, cache), np.ones(3 * n), -1.0)]
     R = state.rotations
     w, mu = term.weight, ROTATION_REGULARISATION
     L = sp.csr_matrix(term.L, copy=True)  # sorted below; the term keeps its own
@@ -110,7 +140,51 @@ def _shape_factors(term: ShapeTerm, state: LocalState) -> list:
     return [base, (C, np.ones(3 * n), -1.0)]
 
 
-def _stretch_factors(term: StretchTerm, state: LocalState) -> list:
+def _rotation_factor(term: ShapeTerm, state: LocalState, cache: dict) -> sp.csr_matrix:
+    """The numpy reference's ``C`` from the compiled kernel, its pattern kept in ``cache``."""
+    from .coarse_kernels import rotation_factor
+
+    key = (id(term), "rotations")
+    if key not in cache:
+        n = term.n
+        L = sp.csr_matrix(term.L, copy=True)
+        L.sort_indices()
+        keys = np.repeat(np.arange(n), np.diff(L.indptr)) * n + L.indices
+        E = np.ascontiguousarray(term.E, dtype=np.int64)
+        own_own = np.stack([np.searchsorted(keys, E[:, k] * n + E[:, k]) for k in (0, 1)])
+        own_other = np.stack([np.searchsorted(keys, E[:, k] * n + E[:, 1 - k]) for k in (0, 1)])
+        count = np.diff(L.indptr)
+        # row 3 i + c: 3 entries (columns 3 v + a) per entry v of L's row i
+        indptr = np.r_[0, np.cumsum(np.repeat(3 * count, 3))].astype(np.int64)
+        rows = np.repeat(np.arange(n), count)
+        cols = np.empty(9 * L.nnz, dtype=np.int64)
+        for i_c in range(3):
+            start = (
+                9 * L.indptr[rows] + 3 * i_c * count[rows] + 3 * (np.arange(L.nnz) - L.indptr[rows])
+            )
+            for a in range(3):
+                cols[start + a] = 3 * L.indices + a
+        cols, indptr = _index_arrays(cols, indptr, (3 * n, 3 * n))
+        cache[key] = (
+            (L.indptr.astype(np.int64), L.indices.astype(np.int64), L.data),
+            E,
+            np.ascontiguousarray(term.rest_edges, dtype=np.float64),
+            np.ascontiguousarray(term.delta, dtype=np.float64),
+            own_own,
+            own_other,
+            cols,
+            indptr,
+        )
+    L, E, rest, delta, own_own, own_other, cols, indptr = cache[key]
+    R = np.ascontiguousarray(state.rotations, dtype=np.float64)
+    data = rotation_factor(
+        *L, R, delta, E, rest, own_own, own_other, float(term.weight),
+        float(ROTATION_REGULARISATION),
+    )  # fmt: skip
+    return sp.csr_matrix((data, cols, indptr), shape=(3 * term.n, 3 * term.n))
+
+
+def _stretch_factors(term: StretchTerm, state: LocalState, cache: dict | None = None) -> list:
     d = term.applied(state)
     length = np.linalg.norm(d, axis=1)
     u = d / np.maximum(length, 1e-300)[:, None]
@@ -118,14 +192,15 @@ def _stretch_factors(term: StretchTerm, state: LocalState) -> list:
     # k (u uᵀ + s (I − u uᵀ)) = k u uᵀ + k s Σ_c p_c p_cᵀ with p_c the rows of I − u uᵀ
     proj = np.eye(3)[None] - u[:, :, None] * u[:, None, :]
     K = term.K
-    J = sp.vstack([_kron3(K, u)] + [_kron3(K, proj[:, c]) for c in range(3)], format="csr")
-    w = np.concatenate([term.weights] + [term.weights * across] * 3)
-    return [(J, w, 1.0)]
+    across = term.weights * across
+    return [(_kron3(K, u, cache), term.weights, 1.0)] + [
+        (_kron3(K, proj[:, c], cache), across, 1.0) for c in range(3)
+    ]
 
 
-def _smooth_factors(term: SmoothJoinTerm, state: LocalState) -> list:
+def _smooth_factors(term: SmoothJoinTerm, state: LocalState, cache: dict | None = None) -> list:
     if term.mode == "paper":
-        return [(_kron3(term.K), np.repeat(term.weights, 3), 1.0)]
+        return [(_kron3(term.K, cache=cache), np.repeat(term.weights, 3), 1.0)]
     k = term.K.shape[0]
     r = term.applied(state) - term.target(state)
     size = np.linalg.norm(r, axis=1)
@@ -135,10 +210,10 @@ def _smooth_factors(term: SmoothJoinTerm, state: LocalState) -> list:
     # a row exactly on a face: the face's normal; exactly inside a wedge: nothing
     tol = np.broadcast_to(np.asarray(term.tolerance, dtype=np.float64), (k,))
     m = np.where((~moved & (tol > 0))[:, None], 0.0, m)
-    return [(_kron3(term.K, m), term.weights, 1.0)]
+    return [(_kron3(term.K, m, cache), term.weights, 1.0)]
 
 
-def gauss_newton_factors(terms: list, state: LocalState, n: int) -> list:
+def gauss_newton_factors(terms: list, state: LocalState, n: int, cache: dict | None = None) -> list:
     """Half the Gauss–Newton Hessian at ``state.X`` as a signed sum ``Σ s Jᵀ diag(w) J``.
 
     The factored form costs as many entries as the terms' operators (a band
@@ -153,6 +228,12 @@ def gauss_newton_factors(terms: list, state: LocalState, n: int) -> list:
         A local step's state at ``X`` (n, 3), with ``rotations`` fitted.
     n : int
         Number of vertices.
+    cache : dict, optional
+        Kept by a caller that asks again for the same terms (the two-level
+        model's rebuilds): the factors' patterns are stored in it on the
+        first call, and later calls compute their values only (the
+        rotations' factor with a compiled kernel). The same matrices as
+        without it, to rounding.
 
     Returns
     -------
@@ -164,13 +245,13 @@ def gauss_newton_factors(terms: list, state: LocalState, n: int) -> list:
     parts = []
     for term in terms:
         if isinstance(term, ShapeTerm):
-            parts += _shape_factors(term, state)
+            parts += _shape_factors(term, state, cache)
         elif isinstance(term, StretchTerm):
-            parts += _stretch_factors(term, state)
+            parts += _stretch_factors(term, state, cache)
         elif isinstance(term, SmoothJoinTerm):
-            parts += _smooth_factors(term, state)
+            parts += _smooth_factors(term, state, cache)
         else:
-            parts.append((_kron3(term.K), np.repeat(term.weights, 3), 1.0))
+            parts.append((_kron3(term.K, cache=cache), np.repeat(term.weights, 3), 1.0))
     return parts
 
 

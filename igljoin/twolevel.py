@@ -18,8 +18,9 @@ The coarse matrix ``A_c = Aᵀ H A`` is the model ``H`` projected onto them,
 computed from the model's factored form
 (:func:`igljoin.newton.gauss_newton_factors`) without assembling ``H``, and
 factored (9 a unknowns, a few thousand); both are rebuilt at the current
-iterate when the guest has turned far from where they were built. The
-initial inverse Hessian of the quasi-Newton steps becomes
+iterate when the guest has turned far from where they were built (values
+only: the patterns are the first build's). The initial inverse Hessian of
+the quasi-Newton steps becomes
 
 * additive: ``P⁻¹ + A A_c⁻¹ Aᵀ``, or
 * balancing (``balancing=True``): ``C + (I − C H) P⁻¹ (I − H C)`` with
@@ -38,10 +39,19 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from .linsolve import FixedQuadratic
+from .errors import SolveError
+from .linsolve import _NOT_FACTORED, FixedQuadratic, available_backends
 from .newton import dofs, gauss_newton_factors
 
-__all__ = ["clusters", "rigid_prolongation", "bending_prolongation", "TwoLevelModel"]
+__all__ = [
+    "clusters",
+    "rigid_prolongation",
+    "bending_prolongation",
+    "TwoLevelModel",
+    "preferred_model",
+    "AUTO_FROM_VERTICES",
+    "AUTO_MODEL",
+]
 
 # relative ridge added to the coarse matrix: a cluster of three nearly collinear vertices
 # has a nearly free rotation about their line; 1e-10 of the mean diagonal keeps its
@@ -126,7 +136,13 @@ def rigid_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
     -------
     scipy.sparse.csr_matrix, shape (3 m, 6 a)
     """
-    a, _, r, radius = _about_centroids(X, labels)
+    a = int(labels.max()) + 1
+    return _cluster_columns(_rigid_blocks(X, labels), labels, a)
+
+
+def _rigid_blocks(X: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """Every vertex's six rigid-motion rows (m, 3, 6) of :func:`rigid_prolongation`."""
+    _, _, r, radius = _about_centroids(X, labels)
     r = r / np.maximum(radius[labels], 1e-300)[:, None]
     blocks = np.zeros((len(X), 3, 6))
     blocks[:, 0, 0] = blocks[:, 1, 1] = blocks[:, 2, 2] = 1.0
@@ -134,7 +150,7 @@ def rigid_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
     blocks[:, 0, 4], blocks[:, 0, 5] = r[:, 2], -r[:, 1]
     blocks[:, 1, 3], blocks[:, 1, 5] = -r[:, 2], r[:, 0]
     blocks[:, 2, 3], blocks[:, 2, 4] = r[:, 1], -r[:, 0]
-    return _cluster_columns(blocks, labels, a)
+    return blocks
 
 
 def _about_centroids(X: np.ndarray, labels: np.ndarray):
@@ -150,11 +166,12 @@ def _about_centroids(X: np.ndarray, labels: np.ndarray):
 def _cluster_columns(blocks: np.ndarray, labels: np.ndarray, a: int) -> sp.csr_matrix:
     """Per-vertex blocks (m, 3, w) placed in their cluster's ``w`` columns: (3 m, w a)."""
     m, _, w = blocks.shape
-    rows = np.broadcast_to(
-        3 * np.arange(m)[:, None, None] + np.arange(3)[None, :, None], blocks.shape
-    )
+    # one row per coordinate, its w entries in the cluster's columns (ascending)
     cols = np.broadcast_to(w * labels[:, None, None] + np.arange(w)[None, None, :], blocks.shape)
-    return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * m, w * a))
+    indptr = np.arange(0, 3 * m * w + 1, w, dtype=np.int64)
+    return sp.csr_matrix(
+        (np.ascontiguousarray(blocks).ravel(), cols.ravel(), indptr), shape=(3 * m, w * a)
+    )
 
 
 def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
@@ -182,9 +199,16 @@ def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
         Columns ``3 j .. 3 j + 2``: cluster ``j``'s ``n u²``, ``n u v``,
         ``n v²``; vertex-major rows.
     """
+    a = int(labels.max()) + 1
+    return _cluster_columns(_bending_blocks(X, labels), labels, a)
+
+
+def _bending_blocks(X: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """Every vertex's three bending rows (m, 3, 3) of :func:`bending_prolongation`."""
     a, count, r, radius = _about_centroids(X, labels)
-    cov = np.zeros((a, 3, 3))
-    np.add.at(cov, labels, r[:, :, None] * r[:, None, :])
+    outer = (r[:, :, None] * r[:, None, :]).reshape(-1, 9)
+    cov = np.stack([np.bincount(labels, outer[:, k], minlength=a) for k in range(9)], 1)
+    cov = cov.reshape(a, 3, 3)
     _, vec = np.linalg.eigh(cov)  # ascending: vec[:, :, 0] the normal
     r = r / np.maximum(radius[labels], 1e-300)[:, None]
     frame = vec[labels]
@@ -196,8 +220,68 @@ def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
         np.stack([np.bincount(labels, shapes[:, k], minlength=a) for k in range(3)], 1)
         / count[:, None]
     )[labels]
-    blocks = normal[:, :, None] * shapes[:, None, :]  # (m, 3, 3): coordinate, shape
-    return _cluster_columns(blocks, labels, a)
+    return normal[:, :, None] * shapes[:, None, :]  # (m, 3, 3): coordinate, shape
+
+
+class _CoarseFactor:
+    """Pardiso's factorization of ``A_c`` whose analysis is reused for new values.
+
+    Parameters
+    ----------
+    Ac : scipy.sparse.csr_matrix, shape (k, k)
+        Symmetric positive definite, sorted indices, every diagonal entry
+        stored.
+
+    Attributes
+    ----------
+    Qff : scipy.sparse.csr_matrix, shape (k, k)
+        The matrix factored (as :class:`igljoin.linsolve.FixedQuadratic`
+        names it).
+    backend : str
+    """
+
+    backend = "pardiso"
+
+    def __init__(self, Ac: sp.csr_matrix):
+        from .linsolve import _Pardiso, _PardisoError
+
+        self.Qff = Ac
+        self._pattern = (Ac.indptr.copy(), Ac.indices.copy())
+        rows = np.repeat(np.arange(Ac.shape[0]), np.diff(Ac.indptr))
+        self._upper = Ac.indices >= rows
+        try:
+            self._pardiso = _Pardiso(Ac)
+        except _PardisoError as exc:
+            raise SolveError(_NOT_FACTORED) from exc
+        # Pardiso keeps the sorted upper triangle, every diagonal entry stored: the same
+        # entries in the same order when A_c stores its diagonal (else no reuse)
+        self._reusable = len(self._pardiso.a) == int(self._upper.sum())
+
+    def refactor(self, Ac: sp.csr_matrix) -> bool:
+        """Factor the new values of the same pattern; ``False`` if the pattern differs."""
+        from .linsolve import _pardiso_call, _PardisoError
+
+        same = (
+            self._reusable
+            and np.array_equal(Ac.indptr, self._pattern[0])
+            and np.array_equal(Ac.indices, self._pattern[1])
+        )
+        if not same:
+            return False
+        p = self._pardiso
+        p.a[:] = Ac.data[self._upper]
+        one = np.zeros(1)
+        try:
+            _pardiso_call(p.lib, p.itype, p.pt, p.iparm, 22, p.n, p.a, p.ia, p.ja, 1, one,
+                          one.copy(), p.mtype)  # fmt: skip
+        except _PardisoError as exc:
+            raise SolveError(_NOT_FACTORED) from exc
+        self.Qff = Ac
+        return True
+
+    def solve_free(self, b: np.ndarray) -> np.ndarray:
+        """``A_c⁻¹ b`` for ``b`` of shape (k, m); returns shape (k, m)."""
+        return np.ascontiguousarray(self._pardiso.solve(b))
 
 
 class TwoLevelModel:
@@ -221,12 +305,18 @@ class TwoLevelModel:
     inverse Hessian under the same pairs is still a descent model).
 
     The defaults (rigid motions, built once) are what the join option
-    ``preconditioner="two-level"`` uses: with ``bending`` and
+    ``preconditioner="two-level"`` uses; ``"auto"`` uses :data:`AUTO_MODEL`
+    from :data:`AUTO_FROM_VERTICES` free vertices: with ``bending`` and
     ``rebuild_angle=0.2`` the iteration counts are lower still and no longer
-    grow on the patch (36 / 43 at 10k / 100k against 46 / 75), but the
-    rebuilds cost the time they save, and on the paper's longer patch
-    (compressed into its hole) the 24 rebuilds led to another stationary
-    point, 1 % higher in energy (docs/limits.md).
+    grow on the patch (35 / 30 / 41 / 55 at 10k / 20k / 40k / 100k against
+    100 / 134 / 228 / 248), and on the tube they grow more slowly (73 / 162 /
+    203 / 230 against 199 / 342 / 486 / 746). A rebuild computes
+    values only — the patterns of the factors, of ``A_c`` and Pardiso's
+    analysis of ``A_c`` are the first build's — 0.1 s at 10k and 0.5 s at
+    40k guest vertices. Rebuilds in the first iterations, while the guest
+    still moves far, led the paper's longer patch (compressed into its
+    hole) to another stationary point 1 % higher in energy;
+    ``first_rebuild=6`` keeps it at the default's minimum.
 
     Parameters
     ----------
@@ -248,6 +338,10 @@ class TwoLevelModel:
     rebuild_angle : float or None
         Radians a vertex's rotation may turn from its value at the last
         build before the coarse space is rebuilt; ``None``: built once.
+    max_rebuilds : int or None
+        Rebuilds allowed after the first build (``None``: no limit).
+    first_rebuild : int
+        Earliest iteration at which a rebuild is made.
 
     Attributes
     ----------
@@ -255,6 +349,8 @@ class TwoLevelModel:
         Cluster of every free vertex (after the first refresh).
     factorizations : int
         Coarse factorizations made (builds).
+    built_at : list of int
+        Iteration of every build.
     seconds : dict
         ``clusters``, ``model`` (the factored Gauss–Newton model), ``coarse``
         (``Aᵀ H A``) and ``factor`` times, summed over the builds.
@@ -267,14 +363,20 @@ class TwoLevelModel:
         balancing: bool = False,
         bending: bool = False,
         rebuild_angle: float | None = None,
+        max_rebuilds: int | None = None,
+        first_rebuild: int = 1,
     ):
         self.solver = solver
         self.cluster_size = int(cluster_size)
         self.balancing = bool(balancing)
         self.bending = bool(bending)
         self.rebuild_angle = None if rebuild_angle is None else float(rebuild_angle)
+        self.max_rebuilds = None if max_rebuilds is None else int(max_rebuilds)
+        self.first_rebuild = int(first_rebuild)
+        self.built_at = []
         self.free_dofs = dofs(solver.free)
         self.labels = None
+        self._cache = {}
         self.built_rotations = None
         self.factorizations = 0
         self.seconds = {"clusters": 0.0, "model": 0.0, "coarse": 0.0, "factor": 0.0}
@@ -295,8 +397,15 @@ class TwoLevelModel:
         quasi-Newton memory, of which there is none yet).
         """
         first = self.labels is None
-        if not first and (self.rebuild_angle is None or self.turned(state) <= self.rebuild_angle):
-            return False
+        if not first:
+            if (
+                self.rebuild_angle is None
+                or iteration < self.first_rebuild
+                or (self.max_rebuilds is not None and self.factorizations > self.max_rebuilds)
+            ):
+                return False
+            if self.turned(state) <= self.rebuild_angle:
+                return False
         ls = self.solver
         t0 = time.perf_counter()
         X = state.X[ls.free]
@@ -306,32 +415,91 @@ class TwoLevelModel:
             # other terms' block connects the mesh just as well
             graph = ls.factor.Qff if ls.wide is None else ls.factor.Sff
             self.labels = clusters(X, graph, self.cluster_size)
+            self._vertex_labels = np.full(ls.n, -1, dtype=np.int64)
+            self._vertex_labels[ls.free] = self.labels
         t1 = time.perf_counter()
-        self.factors = gauss_newton_factors(ls.terms, state, ls.n)
+        self.factors = gauss_newton_factors(ls.terms, state, ls.n, self._cache)
         t2 = time.perf_counter()
-        A = rigid_prolongation(X, self.labels)
+        blocks = _rigid_blocks(X, self.labels)
         if self.bending:
-            A = sp.hstack([A, bending_prolongation(X, self.labels)], format="csr")
-        A = A.tocoo()
-        # the same columns on all 3n coordinates (zero rows at the fixed vertices)
-        full = sp.csr_matrix((A.data, (self.free_dofs[A.row], A.col)), shape=(3 * ls.n, A.shape[1]))
-        # Σ s (J A)ᵀ diag(w) (J A) as one product over the stacked factors
-        J = sp.vstack([f[0] for f in self.factors], format="csr")
-        w = np.concatenate([sign * wf for _, wf, sign in self.factors])
-        JA = J @ full
-        Ac = sp.csr_matrix(JA.T @ (sp.diags(w) @ JA))
-        Ac = Ac + _RIDGE * Ac.diagonal().mean() * sp.eye(A.shape[1])
-        t3 = time.perf_counter()
-        self.A = A.tocsr()
+            blocks = np.concatenate([blocks, _bending_blocks(X, self.labels)], axis=2)
+        a = int(self.labels.max()) + 1
+        self.A = _cluster_columns(blocks, self.labels, a)
         self.At = sp.csr_matrix(self.A.T)
-        self.coarse_factor = FixedQuadratic(Ac, np.zeros(0, dtype=np.int64), ls.linear_solver)
+        Ac = self._project(blocks, a)
+        t3 = time.perf_counter()
+        self.coarse_factor = self._factor(Ac)
         self.factorizations += 1
+        self.built_at.append(int(iteration))
         if state.rotations is not None:
             self.built_rotations = state.rotations[ls.free].copy()
         t4 = time.perf_counter()
         for key, dt in zip(self.seconds, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
             self.seconds[key] += dt
         return first
+
+    def _factor(self, Ac: sp.csr_matrix):
+        """Factor ``A_c``: Pardiso reusing its first analysis when it may be used.
+
+        ``A_c``'s pattern is the same at every build, so the fill-reducing
+        order and the symbolic factorization of the first build serve all
+        rebuilds: only the numeric factorization is redone (at 40k guest
+        vertices 0.17 s against 0.59 s for a whole Pardiso factorization and
+        2.7 s for cholespy's). Without Pardiso (or with ``linear_solver``
+        ``"igl"`` or ``"cholespy"`` asked for), the solver's backend factors
+        it anew.
+        """
+        ls = self.solver
+        if ls.linear_solver not in ("auto", "pardiso") or "pardiso" not in available_backends():
+            return FixedQuadratic(Ac, np.zeros(0, dtype=np.int64), ls.linear_solver)
+        factor = getattr(self, "coarse_factor", None)
+        if isinstance(factor, _CoarseFactor) and factor.refactor(Ac):
+            return factor
+        return _CoarseFactor(Ac)
+
+    def _project(self, blocks: np.ndarray, a: int) -> sp.csr_matrix:
+        """``A_c = Aᵀ H A`` from the factors, plus the ridge; shape (w a, w a).
+
+        The patterns of the factors and of ``A_c`` are found at the first
+        build (and again only if a factor's pattern changed); a rebuild
+        recomputes values only (:func:`igljoin.coarse_kernels.project`).
+        """
+        from . import coarse_kernels as ck
+
+        mats = [sp.csr_matrix(J) for J, _, _ in self.factors]
+        pattern = getattr(self, "_pattern", None)
+        same = pattern is not None and len(pattern[0]) == len(mats)
+        same = same and all(
+            np.array_equal(J.indptr, p) and np.array_equal(J.indices, i)
+            for J, p, i in zip(mats, pattern[0], pattern[1])
+        )
+        if not same:
+            # per factor: the clusters each row reaches and its cluster pairs' keys; the
+            # blocks of A_c are their union
+            rows = [ck.row_clusters(J.indptr, J.indices, self._vertex_labels) for J in mats]
+            keys = [ck.pair_keys(ptr, members, a) for ptr, members, _ in rows]
+            bptr, bcols, blocks_of, lower, upper = ck.block_pattern([k for k, _ in keys], a)
+            self._pattern = (
+                [J.indptr.copy() for J in mats],
+                [J.indices.copy() for J in mats],
+                [(r[0], r[2], k[1], b) for r, k, b in zip(rows, keys, blocks_of)],
+                (bptr, bcols, lower, upper),
+            )
+        bptr, bcols, lower, upper = self._pattern[3]
+        w = blocks.shape[2]
+        B = np.zeros((self.solver.n, 3, w))
+        B[self.solver.free] = blocks
+        out = np.zeros((len(bcols), w, w))
+        for (J, wf, sign), (ptr, slot, pair_ptr, pair_block) in zip(self.factors, self._pattern[2]):
+            J = sp.csr_matrix(J)
+            weights = sign * np.asarray(wf, dtype=np.float64)
+            ck.project(
+                J.indptr, J.indices, J.data, weights, ptr, slot, pair_ptr, pair_block, B, out
+            )
+        out[lower] = out[upper].transpose(0, 2, 1)
+        Ac = sp.bsr_matrix((out, bcols, bptr), shape=(w * a, w * a)).tocsr()
+        Ac.setdiag(Ac.diagonal() + _RIDGE * Ac.diagonal().mean())
+        return Ac
 
     def _coarse(self, v: np.ndarray) -> np.ndarray:
         """``A A_c⁻¹ Aᵀ v`` for ``v`` of shape (3 n_free,)."""
@@ -356,3 +524,44 @@ class TwoLevelModel:
         c = self._coarse(flat)
         z = fine((flat - self._model(c)).reshape(v.shape)).reshape(-1)
         return (c + z - self._coarse(self._model(z))).reshape(v.shape)
+
+
+#: Free guest vertices from which ``preconditioner="auto"`` uses :data:`AUTO_MODEL`
+#: (``pipelines/coarse_study.py time``, one BLAS thread, the iteration's seconds with it
+#: over those with ``P`` alone: tube / patch 0.9-1.1 / 0.7-1.2 at 10k, 0.90-0.96 / 0.55-0.63
+#: at 20k, 0.69-0.96 / 0.40-0.42 at 40k, 0.71 / 0.51-0.58 at 100k).
+AUTO_FROM_VERTICES = 20_000
+
+#: The two-level model ``preconditioner="auto"`` uses from :data:`AUTO_FROM_VERTICES`:
+#: bending motions, rebuilt once a rotation has turned 0.2 rad, never before the sixth
+#: iteration (earlier rebuilds, while the guest still moves far, led the paper's longer
+#: patch to another stationary point, 1 % higher).
+AUTO_MODEL = {"bending": True, "rebuild_angle": 0.2, "first_rebuild": 6}
+
+
+def preferred_model(solver, options):
+    """The quasi-Newton model a join uses for ``options.preconditioner``.
+
+    Parameters
+    ----------
+    solver : LocalGlobalSolver
+        The join's iteration (its free vertices count).
+    options : JoinOptions
+
+    Returns
+    -------
+    TwoLevelModel or None
+        ``None`` (the factored ``P`` alone) for ``"factored"``, for
+        ``acceleration=0`` and for ``"auto"`` below
+        :data:`AUTO_FROM_VERTICES` free vertices; the rigid coarse space
+        built once for ``"two-level"``; :data:`AUTO_MODEL` for ``"auto"``
+        from :data:`AUTO_FROM_VERTICES` on.
+    """
+    choice = options.preconditioner
+    if options.acceleration == 0 or choice == "factored":
+        return None
+    if choice == "two-level":
+        return TwoLevelModel(solver)
+    if len(solver.free) >= AUTO_FROM_VERTICES:
+        return TwoLevelModel(solver, **AUTO_MODEL)
+    return None

@@ -5,6 +5,8 @@ Usage::
     python pipelines/coarse_study.py run tube 10000 [40000 ...]   # iterations table
     python pipelines/coarse_study.py pcg tube 2500 10000            # linear PCG counts
     python pipelines/coarse_study.py line tube 10000                # energy along steps
+    python pipelines/coarse_study.py time tube 10000 [40000 ...]    # seconds, P against rebuilt
+    python pipelines/coarse_study.py time tube 10000 cluster_size=40 rebuild_angle=0.3
 
 ``run`` joins the end-to-end tube (``tube``) or the partial patch
 (``patch``) with about the given number of guest vertices four ways from
@@ -16,6 +18,13 @@ rejected line-search trials, coarse builds, seconds (the model's set-up
 included) and the final energy against the default run's (relative; negative
 is lower), and the iteration at which each run first came within 1e-2 ..
 1e-6 of the default's final energy.
+
+``time`` runs ``P`` and the bending model rebuilt as the guest turns
+(:data:`TIMED`) from the same start, and prints iterations, seconds of the
+whole iteration, of the coarse set-up (clusters and first build) and of the
+rebuilds apart, and the energy gap to ``P``'s run. With ``IGLJOIN_TREE``
+set to another checkout, that checkout's package is timed (the same script
+on two versions of the code, alternated by the caller).
 
 ``pcg`` counts the conjugate-gradient iterations that solve the
 Gauss–Newton model at the default run's minimum (random right-hand side,
@@ -31,6 +40,8 @@ the ratio departs from 1.
 
 from __future__ import annotations
 
+import inspect
+import os
 import sys
 import time
 from pathlib import Path
@@ -38,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+sys.path.insert(0, os.environ.get("IGLJOIN_TREE", str(ROOT)))
 
 import igljoin  # noqa: E402
 from igljoin import phantoms, twolevel  # noqa: E402
@@ -104,6 +115,52 @@ def table(kind: str, sizes: list) -> None:
             model = twolevel.TwoLevelModel(solver.solver, **kw)
             res, seconds = run(solver, model)
             _row(kind, n, name, res, seconds, e_ref, model.factorizations)
+
+
+#: The model ``time`` compares with ``P``.
+TIMED = dict(bending=True, rebuild_angle=0.2, first_rebuild=6)
+
+
+def timed(kind: str, sizes: list) -> None:
+    # an older checkout's TwoLevelModel (IGLJOIN_TREE) takes fewer arguments: those it
+    # does not know are left out (its policy: rebuilds from the first iteration, no cap)
+    known = inspect.signature(twolevel.TwoLevelModel).parameters
+    kw = {k: v for k, v in TIMED.items() if k in known}
+    print("| case | n | model | iterations | rejected | builds | s | set-up s | rebuilds s | gap |")
+    print("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|")
+    for v in sizes:
+        solver = join_solver(kind, v)
+        n = solver.solver.n
+        run(solver, max_iterations=2)
+        base, seconds = run(solver)
+        e_ref = base.energy[-1]
+        print(
+            f"| {kind} | {n} | P | {base.iterations} | {base.stats['rejected']} | | "
+            f"{seconds:.2f} | | | |",
+            flush=True,
+        )
+        # and the first build of a process loads the compiled coarse kernels: not timed
+        run(solver, twolevel.TwoLevelModel(solver.solver, **kw), max_iterations=2)
+        model = twolevel.TwoLevelModel(solver.solver, **kw)
+        first = {}
+
+        def refresh(state, it, inner=model.refresh, first=first):
+            t0 = time.perf_counter()
+            out = inner(state, it)
+            if it == 1:
+                first["s"] = time.perf_counter() - t0
+            return out
+
+        model.refresh = refresh
+        res, seconds = run(solver, model)
+        total = res.timings["model"]
+        gap = (res.energy[-1] - e_ref) / e_ref
+        print(
+            f"| {kind} | {n} | rebuilt | {res.iterations} | {res.stats['rejected']} "
+            f"| {model.factorizations} | {seconds:.2f} | {first['s']:.2f} "
+            f"| {total - first['s']:.2f} | {gap:+.1e} |",
+            flush=True,
+        )
 
 
 def _pcg(H, M, b, tol=1e-6, maxit=3000) -> int:
@@ -182,8 +239,15 @@ def line(kind: str, vertices: float, at=(0, 20, 60)) -> None:
 
 
 def main(argv: list) -> None:
+    # key=value arguments replace TwoLevelModel arguments of TIMED (numbers or None)
+    for arg in [a for a in argv if "=" in a]:
+        key, value = arg.split("=")
+        TIMED[key] = None if value == "None" else float(value)
+        if key in ("cluster_size", "first_rebuild", "max_rebuilds") and value != "None":
+            TIMED[key] = int(TIMED[key])
+    argv = [a for a in argv if "=" not in a]
     what, kind, sizes = argv[0], argv[1], [float(v) for v in argv[2:]]
-    {"run": table, "pcg": pcg}.get(what, lambda k, s: line(k, s[0]))(kind, sizes)
+    {"run": table, "pcg": pcg, "time": timed}.get(what, lambda k, s: line(k, s[0]))(kind, sizes)
 
 
 if __name__ == "__main__":

@@ -9,8 +9,8 @@ import igljoin
 from igljoin import newton, phantoms, twolevel
 
 
-def _solver(scenario, length="equal"):
-    s = phantoms.paper_sample(scenario, length, resolution=0.5)
+def _solver(scenario, length="equal", resolution=0.5):
+    s = phantoms.paper_sample(scenario, length, resolution=resolution)
     return igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
 
 
@@ -177,8 +177,123 @@ def test_the_join_option_reaches_the_default_joins_minimum_without_refactoring_t
 def test_an_unknown_preconditioner_is_refused_with_the_choices():
     with pytest.raises(igljoin.OptionsError, match="preconditioner='multigrid' is not one of"):
         igljoin.JoinOptions(preconditioner="multigrid")
+    with pytest.raises(igljoin.OptionsError, match="'factored', 'two-level', 'auto'"):
+        igljoin.JoinOptions(preconditioner="Auto")
 
 
 def test_the_two_level_preconditioner_without_quasi_newton_steps_is_refused():
     with pytest.raises(igljoin.OptionsError, match="give acceleration > 0"):
         igljoin.JoinOptions(preconditioner="two-level", acceleration=0)
+
+
+def _moved_states(solver):
+    """Local states at the start and after ten iterations (the guest has turned)."""
+    ls = solver.solver
+    X0 = solver.initial_guess()
+    X0[ls.fixed] = solver.corr.targets
+    start, _, _ = ls.local(X0)
+    moved = ls.run(X0, solver.corr.targets, max_iterations=10).X
+    later, _, _ = ls.local(moved, start.rotations)
+    return start, later
+
+
+def test_a_rebuild_projects_the_model_at_the_new_positions(patch):
+    ls = patch.solver
+    start, later = _moved_states(patch)
+    model = twolevel.TwoLevelModel(ls, bending=True, rebuild_angle=0.0)
+    model.refresh(start, 1)
+    assert not model.refresh(later, 2) and model.factorizations == 2
+    # only the values were recomputed: the model at `later` projected onto the motions at
+    # `later`, as the assembled Gauss–Newton matrix gives it
+    H = newton.gauss_newton(ls.terms, later, ls.n)
+    free = newton.dofs(ls.free)
+    expected = (model.A.T @ H[free][:, free] @ model.A).toarray()
+    got = model.coarse_factor.Qff.toarray()
+    # rounding (1e-12 of the largest entry) plus the ridge of 1e-10 of the mean diagonal
+    assert np.abs(got - expected).max() <= 1e-9 * np.abs(expected).max()
+    # and the refactored coarse matrix solves: residual at the rounding of a Cholesky solve
+    # of a matrix whose ridge bounds its condition number by ~1e10 (1e-5 is far above it)
+    b = np.random.default_rng(3).standard_normal((got.shape[0], 1))
+    x = model.coarse_factor.solve_free(b)
+    assert np.linalg.norm(got @ x - b) <= 1e-5 * np.linalg.norm(b)
+
+
+def test_factors_from_the_cache_are_the_reference_factors(patch):
+    ls = patch.solver
+    start, later = _moved_states(patch)
+    cache = {}
+    newton.gauss_newton_factors(ls.terms, start, ls.n, cache)  # fills the cache
+    for state in (start, later):
+        ref = newton.gauss_newton_factors(ls.terms, state, ls.n)
+        got = newton.gauss_newton_factors(ls.terms, state, ls.n, cache)
+        assert len(ref) == len(got)
+        for (J0, w0, s0), (J1, w1, s1) in zip(ref, got):
+            assert s0 == s1 and J0.shape == J1.shape
+            # the compiled rotation factor inverts 3 x 3 blocks by cofactors, numpy by
+            # LAPACK: the same matrix to rounding (1e-12 of its largest entry)
+            assert abs(J0 - J1).max() <= 1e-12 * abs(J0).max()
+            assert np.array_equal(w0, w1)
+
+
+def test_no_rebuild_before_the_first_rebuild_iteration_nor_past_the_cap(patch):
+    ls = patch.solver
+    start, later = _moved_states(patch)
+    model = twolevel.TwoLevelModel(ls, rebuild_angle=0.0, first_rebuild=6, max_rebuilds=1)
+    model.refresh(start, 1)
+    assert not model.refresh(later, 5) and model.factorizations == 1
+    model.refresh(later, 6)
+    model.refresh(start, 7)  # the one rebuild allowed was made at iteration 6
+    assert model.factorizations == 2 and model.built_at == [1, 6]
+
+
+def test_the_preferred_model_follows_the_option_and_the_size(patch, monkeypatch):
+    ls = patch.solver
+    opt = igljoin.JoinOptions
+    assert twolevel.preferred_model(ls, opt()) is None
+    rigid = twolevel.preferred_model(ls, opt(preconditioner="two-level"))
+    assert not rigid.bending and rigid.rebuild_angle is None
+    # the patch at resolution 0.5 is far below the threshold: the factored form
+    assert len(ls.free) < twolevel.AUTO_FROM_VERTICES
+    assert twolevel.preferred_model(ls, opt(preconditioner="auto")) is None
+    monkeypatch.setattr(twolevel, "AUTO_FROM_VERTICES", len(ls.free))
+    auto = twolevel.preferred_model(ls, opt(preconditioner="auto"))
+    assert auto.bending and auto.rebuild_angle == twolevel.AUTO_MODEL["rebuild_angle"]
+    # "auto" is a choice, not a demand: without quasi-Newton steps it is the factored form
+    assert twolevel.preferred_model(ls, opt(preconditioner="auto", acceleration=0)) is None
+
+
+def test_the_auto_model_keeps_the_longer_patch_at_the_plain_runs_minimum():
+    # compressed into its hole, the paper's longer patch has more than one stationary
+    # point: rebuilds in the first iterations (while the guest still moves far) led it to
+    # one 1 % higher; AUTO_MODEL makes none before the sixth iteration
+    solver = _solver("partial_patch", "longer", resolution=1.0)
+    ls, opt = solver.solver, solver.options
+    X0, bc = solver.initial_guess(), solver.corr.targets
+    model = twolevel.TwoLevelModel(ls, **twolevel.AUTO_MODEL)
+    fast = ls.run(X0, bc, acceleration=opt.acceleration, max_iterations=2000, model=model,
+                  tolerance=opt.energy_tolerance, scale=solver.guest_mean_edge)  # fmt: skip
+    # the reference: the plain iteration to a relative energy change of 1e-13 (as above)
+    plain = ls.run(X0, bc, acceleration=0, max_iterations=30000, tolerance=1e-13,
+                   scale=solver.guest_mean_edge)  # fmt: skip
+    gap = (fast.energy[-1] - plain.energy[-1]) / plain.energy[-1]
+    # the project's convergence requirement: within 1e-6 (relative) of the long plain run
+    assert fast.converged and gap <= 1e-6
+    assert model.factorizations >= 2 and min(model.built_at[1:]) >= 6
+
+
+def test_the_auto_option_joins_with_the_preferred_model_from_its_threshold(monkeypatch):
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.5)
+    solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    default = solver.solve()
+    assert solver.last_run.timings["model"] == 0.0
+    # below the threshold "auto" is the factored form: the very same iterations
+    same = solver.solve(preconditioner="auto")
+    assert same.iterations == default.iterations and solver.last_run.timings["model"] == 0.0
+    monkeypatch.setattr(twolevel, "AUTO_FROM_VERTICES", 0)
+    auto = solver.solve(preconditioner="auto")
+    # from the threshold on, the coarse model is built (its clock runs) ...
+    assert solver.last_run.timings["model"] > 0.0
+    # ... and the join stops at the default's minimum (both at the 1e-7 convergence
+    # tolerance: well within the project's 1e-6 requirement)
+    gap = abs(auto.energy[-1] - default.energy[-1]) / default.energy[-1]
+    assert auto.converged and gap <= 1e-6
