@@ -32,7 +32,7 @@ from .solve import LocalGlobalSolver
 from .start import bulge, bulge_basis, path_prediction, rigid_start
 from .stiffness import needs_guest, resolve_stiffness
 from .terms import unique_edges
-from .twolevel import TwoLevelModel
+from .twolevel import preferred_model
 from .validate import check_surface
 
 __all__ = ["JoinSolver", "JoinResult", "SeamPair", "SolveProgress", "join"]
@@ -444,7 +444,7 @@ class JoinSolver:
             scale=self.guest_mean_edge,
             acceleration=opt.acceleration,
             callback=None if progress is None else report,
-            model=TwoLevelModel(self.solver) if opt.preconditioner == "two-level" else None,
+            model=preferred_model(self.solver, opt),
         )
         t2 = time.perf_counter()
         self.last_run = run

@@ -39,8 +39,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from .errors import SolveError
-from .linsolve import _NOT_FACTORED, FixedQuadratic, available_backends
+from .linsolve import FixedQuadratic, PardisoRefactor, available_backends
 from .newton import dofs, gauss_newton_factors
 
 __all__ = [
@@ -223,67 +222,6 @@ def _bending_blocks(X: np.ndarray, labels: np.ndarray) -> np.ndarray:
     return normal[:, :, None] * shapes[:, None, :]  # (m, 3, 3): coordinate, shape
 
 
-class _CoarseFactor:
-    """Pardiso's factorization of ``A_c`` whose analysis is reused for new values.
-
-    Parameters
-    ----------
-    Ac : scipy.sparse.csr_matrix, shape (k, k)
-        Symmetric positive definite, sorted indices, every diagonal entry
-        stored.
-
-    Attributes
-    ----------
-    Qff : scipy.sparse.csr_matrix, shape (k, k)
-        The matrix factored (as :class:`igljoin.linsolve.FixedQuadratic`
-        names it).
-    backend : str
-    """
-
-    backend = "pardiso"
-
-    def __init__(self, Ac: sp.csr_matrix):
-        from .linsolve import _Pardiso, _PardisoError
-
-        self.Qff = Ac
-        self._pattern = (Ac.indptr.copy(), Ac.indices.copy())
-        rows = np.repeat(np.arange(Ac.shape[0]), np.diff(Ac.indptr))
-        self._upper = Ac.indices >= rows
-        try:
-            self._pardiso = _Pardiso(Ac)
-        except _PardisoError as exc:
-            raise SolveError(_NOT_FACTORED) from exc
-        # Pardiso keeps the sorted upper triangle, every diagonal entry stored: the same
-        # entries in the same order when A_c stores its diagonal (else no reuse)
-        self._reusable = len(self._pardiso.a) == int(self._upper.sum())
-
-    def refactor(self, Ac: sp.csr_matrix) -> bool:
-        """Factor the new values of the same pattern; ``False`` if the pattern differs."""
-        from .linsolve import _pardiso_call, _PardisoError
-
-        same = (
-            self._reusable
-            and np.array_equal(Ac.indptr, self._pattern[0])
-            and np.array_equal(Ac.indices, self._pattern[1])
-        )
-        if not same:
-            return False
-        p = self._pardiso
-        p.a[:] = Ac.data[self._upper]
-        one = np.zeros(1)
-        try:
-            _pardiso_call(p.lib, p.itype, p.pt, p.iparm, 22, p.n, p.a, p.ia, p.ja, 1, one,
-                          one.copy(), p.mtype)  # fmt: skip
-        except _PardisoError as exc:
-            raise SolveError(_NOT_FACTORED) from exc
-        self.Qff = Ac
-        return True
-
-    def solve_free(self, b: np.ndarray) -> np.ndarray:
-        """``A_c⁻¹ b`` for ``b`` of shape (k, m); returns shape (k, m)."""
-        return np.ascontiguousarray(self._pardiso.solve(b))
-
-
 class TwoLevelModel:
     """``P⁻¹`` with a coarse Gauss–Newton correction, as the quasi-Newton initial inverse Hessian.
 
@@ -453,9 +391,9 @@ class TwoLevelModel:
         if ls.linear_solver not in ("auto", "pardiso") or "pardiso" not in available_backends():
             return FixedQuadratic(Ac, np.zeros(0, dtype=np.int64), ls.linear_solver)
         factor = getattr(self, "coarse_factor", None)
-        if isinstance(factor, _CoarseFactor) and factor.refactor(Ac):
+        if isinstance(factor, PardisoRefactor) and factor.refactor(Ac):
             return factor
-        return _CoarseFactor(Ac)
+        return PardisoRefactor(Ac)
 
     def _project(self, blocks: np.ndarray, a: int) -> sp.csr_matrix:
         """``A_c = Aᵀ H A`` from the factors, plus the ridge; shape (w a, w a).
