@@ -94,8 +94,9 @@ class IterationResult:
     stats : dict
         ``local_steps`` (local steps evaluated, including rejected line-search
         trials), ``back_solves``, ``rejected`` (line-search trials that did not
-        decrease the energy enough) and ``restarts`` (quasi-Newton memory
-        dropped).
+        decrease the energy enough), ``restarts`` (quasi-Newton memory
+        dropped) and ``model_builds`` (times a ``model`` was built or rebuilt,
+        each dropping the memory too).
     """
 
     X: np.ndarray
@@ -350,7 +351,13 @@ class LocalGlobalSolver:
         """
         start = time.perf_counter()
         clock = {"local": 0.0, "solve": 0.0, "model": 0.0}
-        stats = {"local_steps": 0, "back_solves": 0, "rejected": 0, "restarts": 0}
+        stats = {
+            "local_steps": 0,
+            "back_solves": 0,
+            "rejected": 0,
+            "restarts": 0,
+            "model_builds": 0,
+        }
         free, fixed = self.free, self.fixed
         # (b, 3) rows for the compiled scatter (broadcast as ``X[fixed] = bc`` would)
         bc = np.ascontiguousarray(
@@ -401,6 +408,7 @@ class LocalGlobalSolver:
                 t0 = time.perf_counter()
                 if model.refresh(state, it):
                     memory.clear()
+                    stats["model_builds"] += 1
                 clock["model"] += time.perf_counter() - t0
             if acceleration > 0 and memory.size:
                 d = -memory.apply(g, back_solve)

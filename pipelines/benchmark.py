@@ -193,6 +193,7 @@ def _with_model(solver, res, model) -> dict:
         tolerance=opt.energy_tolerance,
         scale=solver.guest_mean_edge,
         acceleration=opt.acceleration,
+        time_limit=opt.time_limit,
         model=model,
     )
     seconds = time.perf_counter() - t0
@@ -218,26 +219,40 @@ def _newton(solver, res) -> dict:
     return out
 
 
-#: The two-level models run beside the join: the join option's (the rigid coarse space
-#: built once at the start) and the one with bending motions, rebuilt as the guest turns.
-_TWOLEVEL_FORMS = {
-    "option": {},
-    "bending_rebuilt": {"bending": True, "rebuild_angle": 0.2},
-}
+#: The ``preconditioner`` options run beside the join (each a re-solve of its solver, the
+#: factorization reused): the factored ``P`` alone, the rigid coarse space built once, and
+#: the join's choice by size (``"auto"``: ``P`` below ``igljoin.twolevel.AUTO_FROM_VERTICES``
+#: free vertices, the bending coarse space rebuilt as the guest turns from there).
+_PRECONDITIONERS = ("factored", "two-level", "auto")
 
 
-def _twolevel(solver, res) -> dict:
-    """The join with the two-level preconditioner in its two forms (igljoin.twolevel)."""
-    from igljoin.twolevel import TwoLevelModel
+def _preconditioners(solver, res) -> dict:
+    """The join with each ``preconditioner`` option, from the same start and settings.
 
-    out = {}
-    for form, kwargs in _TWOLEVEL_FORMS.items():
-        model = TwoLevelModel(solver.solver, **kwargs)
-        out[form] = _with_model(solver, res, model)
-        out[form]["builds"] = int(model.factorizations)
-        out[form]["clusters"] = int(model.labels.max()) + 1
-        out[form]["setup_seconds"] = sum(model.seconds.values())
-    return out
+    Every run is ``solver.solve(preconditioner=...)``; *seconds* is its
+    iteration including the model's set-up and rebuilds; *relative_gap* its
+    final energy against the factored ``P``'s run (negative: lower).
+    """
+    own = solver.options.preconditioner
+    runs = {}
+    try:
+        for choice in _PRECONDITIONERS:
+            r = solver.solve(preconditioner=choice)
+            run = solver.last_run
+            runs[choice] = {
+                "iterations": int(r.iterations),
+                "converged": bool(r.converged),
+                "seconds": float(r.timings["iterate"]),
+                "model_seconds": float(run.timings["model"]),
+                "builds": int(run.stats["model_builds"]),
+                "energy": float(r.energy[-1]),
+            }
+    finally:
+        solver.update(preconditioner=own)
+    e = runs["factored"]["energy"]
+    for r in runs.values():
+        r["relative_gap"] = (r["energy"] - e) / abs(e)
+    return runs
 
 
 def run_case(spec: dict) -> dict:
@@ -304,7 +319,7 @@ def run_case(spec: dict) -> dict:
     if spec.get("newton"):
         out["newton"] = _newton(solver, res)
     if spec.get("twolevel"):
-        out["twolevel"] = _twolevel(solver, res)
+        out["twolevel"] = _preconditioners(solver, res)
     if spec["kind"] == "host":
         # the same join with the whole host checked and selected (the path of a small
         # host, and of every host before the neighbourhood checks), back to back
@@ -823,7 +838,7 @@ def _newton_table(cases: list[dict]) -> list[str]:
 
 
 def _twolevel_table(cases: list[dict]) -> list[str]:
-    """Iterations of L-BFGS on ``P`` against the two-level preconditioner, side by side."""
+    """Iterations of the three ``preconditioner`` options, side by side."""
     rows = [c for c in cases if c.get("twolevel")]
     if not rows:
         return []
@@ -831,32 +846,31 @@ def _twolevel_table(cases: list[dict]) -> list[str]:
         "",
         "### Iterations: the factored P against the two-level preconditioner",
         "",
-        "The same join from the same start with `P⁻¹` replaced by `P⁻¹` plus the "
-        "Gauss–Newton model on a coarse space of clusters of about 20 free vertices "
-        '(`igljoin.twolevel`, additive form). *option*: what `preconditioner="two-level"` '
-        "uses, the clusters' six rigid motions built at the start; *bending, rebuilt*: rigid "
-        "and three bending motions per cluster, rebuilt at the current iterate whenever a "
-        "vertex's rotation has turned 0.2 rad (*builds*). *ms*: the iteration including the coarse "
-        "set-up and rebuilds, beside the join's own iteration (*iterate*). *gap*: final energy "
-        "against the join's, relative (negative: lower).",
+        "The same join from the same start, re-solved with each `preconditioner` option "
+        "(the factorization reused). *factored*: `P⁻¹` alone; *two-level*: `P⁻¹` plus the "
+        "Gauss–Newton model on the six rigid motions of clusters of about 20 free vertices, "
+        "built at the start (`igljoin.twolevel`, additive form); *auto*: `P` below "
+        "`igljoin.twolevel.AUTO_FROM_VERTICES` free vertices, from there rigid and three "
+        "bending motions per cluster, rebuilt at the current iterate whenever a vertex's "
+        "rotation has turned 0.2 rad (*builds*). *ms*: the iteration including the coarse "
+        "set-up and rebuilds. *gap*: final energy against the factored run's, relative "
+        "(negative: lower).",
         "",
-        "| case | guest vertices | iterations, P | iterate (ms) | iterations, option "
-        "| ms | gap | iterations, bending, rebuilt | builds | ms | gap |",
+        "| case | guest vertices | iterations, factored | ms | iterations, two-level "
+        "| ms | gap | iterations, auto | builds | ms | gap |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
+
+    def its(t: dict) -> str:
+        return str(t["iterations"]) + ("" if t["converged"] else " (cap)")
+
     for c in rows:
-        cells = []
-        for form in _TWOLEVEL_FORMS:
-            t = c["twolevel"].get(form)
-            if t is None:
-                cells.append("— | — | —" + (" | —" if form == "bending_rebuilt" else ""))
-                continue
-            its = str(t["iterations"]) + ("" if t["converged"] else " (cap)")
-            builds = f" | {t['builds']}" if form == "bending_rebuilt" else ""
-            cells.append(f"{its}{builds} | {_ms(t['seconds'])} | {t['relative_gap']:.1e}")
+        p, two, auto = (c["twolevel"][k] for k in _PRECONDITIONERS)
         lines.append(
-            f"| {c['name']} | {c['counts']['points']:,} | {c['iterations']} | "
-            f"{_ms(c['phases_raw']['iterate'])} | " + " | ".join(cells) + " |"
+            f"| {c['name']} | {c['counts']['points']:,} | {its(p)} | {_ms(p['seconds'])} | "
+            f"{its(two)} | {_ms(two['seconds'])} | {two['relative_gap']:.1e} | "
+            f"{its(auto)} | {auto['builds']} | {_ms(auto['seconds'])} | "
+            f"{auto['relative_gap']:.1e} |"
         )
     return lines
 
@@ -942,10 +956,8 @@ def main(argv=None) -> int:
                 # the Gauss–Newton model's 3n × 3n factorization took 7 s at 10k (17× the
                 # scalar one); at 100k it would take minutes and gigabytes
                 "newton": v <= 10_000,
+                # each option's re-solve at 1M would be another ten minutes
                 "twolevel": v < 1_000_000,
-                # the band smooth join's rows under a 1M tube couple ~3e9 vertex pairs (tens
-                # of GB): its size guard refuses them, and the join runs with the robust rows
-                **({"options": {"smooth_mode": "robust"}} if v >= 1_000_000 else {}),
             }
         )
     results = {"machine": _machine(), "cases": []}
