@@ -267,8 +267,8 @@ class JoinOptions:
         too (203 / 230 against 486 / 746 at 40k / 100k) and less time on
         tubes and patches from 20k on (0.4–0.96 × ``P``'s iteration); with
         ``acceleration=0`` it is the factored form, and so it is when the
-        coarse system would hold more than
-        :data:`igljoin.twolevel.MAX_COARSE_ENTRIES` entries (counted before
+        coarse model would hold more than
+        :data:`igljoin.twolevel.MAX_MODEL_ENTRIES` entries (counted before
         it is built), where ``"two-level"`` is refused with an
         ``OptionsError``.
     linear_solver : {"auto", "igl", "cholespy", "pardiso"}

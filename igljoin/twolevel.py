@@ -42,7 +42,7 @@ from scipy.sparse import csgraph
 from . import coarse_kernels as ck
 from .errors import OptionsError
 from .linsolve import AugmentedQuadratic, FixedQuadratic, PardisoRefactor, available_backends
-from .newton import dofs, gauss_newton_factors
+from .newton import dofs, factor_entries, gauss_newton_factors
 from .terms import ShapeTerm
 
 __all__ = [
@@ -53,7 +53,7 @@ __all__ = [
     "preferred_model",
     "AUTO_FROM_VERTICES",
     "AUTO_MODEL",
-    "MAX_COARSE_ENTRIES",
+    "MAX_MODEL_ENTRIES",
 ]
 
 # relative ridge added to the coarse matrix: a cluster of three nearly collinear vertices
@@ -61,13 +61,15 @@ __all__ = [
 # factorization finite without changing any other coarse mode measurably
 _RIDGE = 1e-10
 
-#: Largest number of entries the coarse system may hold (:attr:`TwoLevelModel.coarse_entries`:
-#: the stored non-zeros of ``A_c``, or of its local part and ``J A``'s band rows when
-#: those are kept apart), counted from the patterns before any of it is built. A 300k
-#: tube whose band rows are assembled into ``A_c`` holds 66 M and peaks 6.5 GB above
-#: the solver's own memory, most of it the factorization's fill; past this limit
-#: ``preconditioner="auto"`` keeps the factored ``P`` and ``"two-level"`` is refused.
-MAX_COARSE_ENTRIES = 100_000_000
+#: Largest number of entries the model may hold (:attr:`TwoLevelModel.model_entries`: the
+#: factors of the Gauss–Newton model, :func:`igljoin.newton.factor_entries`, and the coarse
+#: system, :attr:`TwoLevelModel.coarse_entries`), counted from the patterns before any of it
+#: is built. Measured on tubes with Pardiso, the first build peaks 36-39 bytes per entry
+#: above the solver's own memory (100k guest vertices: 26.7 M entries, 0.97 GB; 300k:
+#: 87 M, 3.4 GB; the 1M tube counts 340 M, ~13 GB over the solver's 8 GB: its build was
+#: stopped at 16 GB in all); 2e8 entries are ~7.5 GB. Past it ``preconditioner="auto"``
+#: keeps the factored ``P`` and ``"two-level"`` is refused.
+MAX_MODEL_ENTRIES = 200_000_000
 
 # a term whose rows reach this many clusters on average (the smooth join's band rows:
 # 82 at 100k guest vertices, 222 at 300k) is kept as rows of J A beside A_c's local part
@@ -295,9 +297,10 @@ class TwoLevelModel:
     augmented system ``[[S, (J A)ᵀ], [J A, −W⁻¹]]`` is factored instead
     (:class:`igljoin.linsolve.AugmentedQuadratic`): the same ``A_c⁻¹``,
     without the dense block. Before anything is built, the entries the coarse
-    system will hold are counted (:attr:`coarse_entries`); above
-    :data:`MAX_COARSE_ENTRIES` the model is refused (an ``OptionsError``) or,
-    with ``fall_back``, stays the factored ``P`` (:attr:`fallback` says why).
+    system and the model's factors will hold are counted
+    (:attr:`model_entries`); above :data:`MAX_MODEL_ENTRIES` the model is
+    refused (an ``OptionsError``) or, with ``fall_back``, stays the factored
+    ``P`` (:attr:`fallback` says why).
 
     Parameters
     ----------
@@ -324,7 +327,7 @@ class TwoLevelModel:
     first_rebuild : int
         Earliest iteration at which a rebuild is made.
     fall_back : bool
-        When the coarse system would hold more than :data:`MAX_COARSE_ENTRIES`
+        When the model would hold more than :data:`MAX_MODEL_ENTRIES`
         entries: keep the factored ``P`` alone (``True``, what
         ``preconditioner="auto"`` asks) instead of raising ``OptionsError``.
 
@@ -340,10 +343,13 @@ class TwoLevelModel:
         ``clusters``, ``model`` (the factored Gauss–Newton model), ``coarse``
         (``Aᵀ H A``) and ``factor`` times, summed over the builds.
     coarse_entries : int or None
-        Entries of the coarse system counted at the first refresh.
+        Entries of the coarse system counted at the first refresh (an upper
+        bound with band rows kept apart).
+    model_entries : int or None
+        Those and the Gauss–Newton model's factors' entries.
     fallback : str or None
         Why the coarse correction was not built (``fall_back`` and too many
-        coarse entries): the model is then ``P⁻¹`` alone; ``None`` otherwise.
+        entries): the model is then ``P⁻¹`` alone; ``None`` otherwise.
     """
 
     def __init__(
@@ -367,6 +373,7 @@ class TwoLevelModel:
         self.fall_back = bool(fall_back)
         self.fallback = None
         self.coarse_entries = None
+        self.model_entries = None
         self.built_at = []
         self.free_dofs = dofs(solver.free)
         self.labels = None
@@ -414,7 +421,7 @@ class TwoLevelModel:
             self._vertex_labels = np.full(ls.n, -1, dtype=np.int64)
             self._vertex_labels[ls.free] = self.labels
             self._wide = self._count(int(self.labels.max()) + 1, 9 if self.bending else 6)
-            if self.coarse_entries > MAX_COARSE_ENTRIES:
+            if self.model_entries > MAX_MODEL_ENTRIES:
                 self.seconds["clusters"] += time.perf_counter() - t0
                 message = self._too_large()
                 if not self.fall_back:
@@ -452,7 +459,7 @@ class TwoLevelModel:
         return ls.linear_solver in ("auto", "pardiso") and "pardiso" in available_backends()
 
     def _count(self, a: int, w: int) -> list:
-        """Which terms are wide; sets :attr:`coarse_entries` from the terms' patterns.
+        """Which terms are wide; sets the entries counted from the terms' patterns.
 
         Only the operators' patterns and the clusters are read: ``A_c``'s
         local blocks are those of ``Tᵀ T`` for the clusters' incidence ``T``
@@ -487,18 +494,24 @@ class TwoLevelModel:
                 local += [(ptr, members) for ptr, members, _ in rows]
         blocks = len(ck.block_pattern(local, a)[1])
         self.coarse_entries = int(w * w * blocks + wide_entries)
+        self.model_entries = self.coarse_entries + sum(factor_entries(t) for t in self.solver.terms)
         return wide
 
     def _too_large(self) -> str:
         """The refusal's message: the count, the limit and the ways out."""
+        pardiso = (
+            ""
+            if self._augmented()
+            else "linear_solver='auto' with Pardiso installed (the smooth join's band rows "
+            "are then kept out of the coarse matrix), "
+        )
         return (
-            f"the two-level preconditioner's coarse system would hold {self.coarse_entries:,} "
-            f"entries, more than igljoin.twolevel.MAX_COARSE_ENTRIES = "
-            f"{MAX_COARSE_ENTRIES:,} (about {12 * self.coarse_entries / 1e9:.1f} GB before "
-            "its factorization's fill): use preconditioner='factored' (or 'auto', which "
-            "then keeps the factored form), linear_solver='auto' with Pardiso installed "
-            "(the smooth join's band rows are then kept out of the coarse matrix), or raise "
-            "igljoin.twolevel.MAX_COARSE_ENTRIES"
+            f"the two-level preconditioner's model would hold {self.model_entries:,} entries "
+            f"(its coarse system {self.coarse_entries:,}), more than "
+            f"igljoin.twolevel.MAX_MODEL_ENTRIES = {MAX_MODEL_ENTRIES:,} (about "
+            f"{38 * self.model_entries / 1e9:.0f} GB at its first build): use "
+            "preconditioner='factored' (or 'auto', which then keeps the factored form), "
+            f"{pardiso}or raise igljoin.twolevel.MAX_MODEL_ENTRIES"
         )
 
     def coarse_matrix(self) -> sp.csr_matrix:
@@ -667,9 +680,9 @@ def preferred_model(solver, options):
         ``acceleration=0`` and for ``"auto"`` below
         :data:`AUTO_FROM_VERTICES` free vertices; the rigid coarse space
         built once for ``"two-level"`` (refused with ``OptionsError`` at
-        its first refresh past :data:`MAX_COARSE_ENTRIES`); :data:`AUTO_MODEL`
+        its first refresh past :data:`MAX_MODEL_ENTRIES`); :data:`AUTO_MODEL`
         for ``"auto"`` from :data:`AUTO_FROM_VERTICES` on, which past
-        :data:`MAX_COARSE_ENTRIES` stays ``P`` alone and says so in its
+        :data:`MAX_MODEL_ENTRIES` stays ``P`` alone and says so in its
         ``fallback``.
     """
     choice = options.preconditioner

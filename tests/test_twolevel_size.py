@@ -65,22 +65,31 @@ def test_the_count_is_the_coarse_matrix_held(patch):
     assert model.coarse_entries == model.coarse_matrix().nnz
 
 
+def test_the_factors_entries_are_counted_from_the_patterns(patch):
+    _, solver = patch
+    ls = solver.solver
+    state = _start(solver)
+    for term in ls.terms:
+        held = sum(J.nnz for J, _, _ in newton.gauss_newton_factors([term], state, ls.n))
+        assert newton.factor_entries(term) == held
+
+
 def test_a_coarse_system_too_large_is_refused_before_it_is_built(patch, monkeypatch):
     s, solver = patch
     ls = solver.solver
-    monkeypatch.setattr(twolevel, "MAX_COARSE_ENTRIES", 100)
+    monkeypatch.setattr(twolevel, "MAX_MODEL_ENTRIES", 100)
 
     def expensive(*args, **kwargs):
         raise AssertionError("the model was built past the guard")
 
     monkeypatch.setattr(twolevel, "gauss_newton_factors", expensive)
     model = twolevel.TwoLevelModel(ls)
-    with pytest.raises(igljoin.OptionsError, match="MAX_COARSE_ENTRIES.*preconditioner='factored'"):
+    with pytest.raises(igljoin.OptionsError, match="MAX_MODEL_ENTRIES.*preconditioner='factored'"):
         model.refresh(_start(solver), 1)
-    assert model.coarse_entries > 100 and model.factorizations == 0
+    assert model.model_entries > 100 and model.factorizations == 0
     # the join with the explicit option is refused with the same message
     fresh = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
-    with pytest.raises(igljoin.OptionsError, match="coarse system would hold"):
+    with pytest.raises(igljoin.OptionsError, match="model would hold"):
         fresh.solve(preconditioner="two-level")
 
 
@@ -89,10 +98,10 @@ def test_auto_keeps_the_factored_form_when_the_coarse_system_is_too_large(patch,
     solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
     default = solver.solve()
     monkeypatch.setattr(twolevel, "AUTO_FROM_VERTICES", 0)
-    monkeypatch.setattr(twolevel, "MAX_COARSE_ENTRIES", 100)
+    monkeypatch.setattr(twolevel, "MAX_MODEL_ENTRIES", 100)
     model = twolevel.preferred_model(solver.solver, igljoin.JoinOptions(preconditioner="auto"))
     assert not model.refresh(_start(solver), 1)
-    assert "MAX_COARSE_ENTRIES" in model.fallback and model.factorizations == 0
+    assert "MAX_MODEL_ENTRIES" in model.fallback and model.factorizations == 0
     auto = solver.solve(preconditioner="auto")
     # the fallback is P alone: the very iterations of the factored form
     assert auto.iterations == default.iterations
