@@ -16,101 +16,86 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-__all__ = ["row_clusters", "pair_keys", "block_pattern", "project", "rotation_factor"]
+__all__ = ["row_clusters", "block_pattern", "project", "motion_rows", "rotation_factor"]
 
 
 @nb.njit(cache=True)
-def row_clusters(indptr, indices, labels):
+def row_clusters(indptr, indices, labels, stride=3):
     """The clusters every row of ``J`` touches and where each entry lands among them.
 
     Parameters
     ----------
     indptr, indices : ndarray of int
-        ``J``'s CSR pattern, shape (r + 1,) and (nnz,); columns ``3 v + c``.
+        ``J``'s CSR pattern, shape (r + 1,) and (nnz,); columns ``3 v + c``
+        (``stride`` 3) or vertices ``v`` (``stride`` 1, an operator ``K``).
     labels : ndarray of int64, shape (n,)
         Cluster of every vertex, −1 at a fixed vertex.
+    stride : int
+        Columns per vertex.
 
     Returns
     -------
     ptr : ndarray of int64, shape (r + 1,)
         Row ``i``'s clusters are ``clusters[ptr[i]:ptr[i + 1]]`` (ascending).
     clusters : ndarray of int64
-    slot : ndarray of int64, shape (nnz,)
+    slot : ndarray of int32, shape (nnz,)
         Position of each entry's cluster within its row's list, −1 at a
         fixed vertex.
     """
     rows = len(indptr) - 1
     ptr = np.zeros(rows + 1, dtype=np.int64)
-    slot = np.full(len(indices), -1, dtype=np.int64)
+    slot = np.full(len(indices), -1, dtype=np.int32)
     out = np.empty(len(indices), dtype=np.int64)
     q = 0
     for r in range(rows):
         start = q
         for p in range(indptr[r], indptr[r + 1]):
-            c = labels[indices[p] // 3]
+            c = labels[indices[p] // stride]
             if c < 0:
                 continue
-            # insertion into the row's short ascending list
-            k = start
-            while k < q and out[k] < c:
-                k += 1
-            if k == q or out[k] != c:
-                for t in range(q, k, -1):
+            # binary search in the row's ascending list, then insertion
+            lo, hi = start, q
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if out[mid] < c:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            if lo == q or out[lo] != c:
+                for t in range(q, lo, -1):
                     out[t] = out[t - 1]
-                out[k] = c
+                out[lo] = c
                 q += 1
         ptr[r + 1] = q
         for p in range(indptr[r], indptr[r + 1]):
-            c = labels[indices[p] // 3]
+            c = labels[indices[p] // stride]
             if c < 0:
                 continue
-            k = start
-            while out[k] != c:
-                k += 1
-            slot[p] = k - start
+            lo, hi = start, q
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if out[mid] < c:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            slot[p] = lo - start
     return ptr, out[:q].copy(), slot
 
 
-@nb.njit(cache=True)
-def pair_keys(ptr, clusters, a):
-    """Every row's cluster pairs ``(k, l)``, ``k ≤ l`` (``k``-major), as keys ``k a + l``.
+def block_pattern(rows: list, a: int):
+    """The (w, w) blocks of ``A_c`` the rows of all factors reach.
+
+    Block ``(k, l)`` is reached when some row touches both clusters ``k``
+    and ``l``: the pattern of ``Tᵀ T`` for the rows' cluster incidence
+    ``T`` (one row per factor row, one column per cluster). Found by a
+    sparse product, in memory proportional to the blocks and to ``T`` —
+    never to the rows' cluster pairs, which a band row reaching hundreds of
+    clusters counts in tens of thousands.
 
     Parameters
     ----------
-    ptr, clusters : ndarray of int64
-        From :func:`row_clusters`.
-    a : int
-        Number of clusters.
-
-    Returns
-    -------
-    keys : ndarray of int64
-    pair_ptr : ndarray of int64, shape (r + 1,)
-        Row ``i``'s pairs are ``keys[pair_ptr[i]:pair_ptr[i + 1]]``.
-    """
-    total = 0
-    for r in range(len(ptr) - 1):
-        q = ptr[r + 1] - ptr[r]
-        total += q * (q + 1) // 2
-    keys = np.empty(total, dtype=np.int64)
-    pair_ptr = np.zeros(len(ptr), dtype=np.int64)
-    t = 0
-    for r in range(len(ptr) - 1):
-        for i in range(ptr[r], ptr[r + 1]):
-            for j in range(i, ptr[r + 1]):
-                keys[t] = clusters[i] * a + clusters[j]
-                t += 1
-        pair_ptr[r + 1] = t
-    return keys, pair_ptr
-
-
-def block_pattern(keys: list, a: int):
-    """The (w, w) blocks of ``A_c`` the rows of all factors reach, and each pair's block.
-
-    Parameters
-    ----------
-    keys : list of ndarray of int64
-        Every factor's upper pair keys (:func:`pair_keys`).
+    rows : list of (ndarray, ndarray)
+        Every factor's ``(ptr, clusters)`` (:func:`row_clusters`).
     a : int
         Number of clusters.
 
@@ -119,27 +104,43 @@ def block_pattern(keys: list, a: int):
     indptr, indices : ndarray of int64, shape (a + 1,) and (b,)
         Block-CSR pattern of ``A_c``, both triangles (ascending columns per
         block row).
-    blocks_of : list of ndarray of int64
-        The block of every pair, per factor.
     lower, upper : ndarray of int64
         Every block below the diagonal and the block above it that is its
         transpose.
     """
-    upper_keys = np.unique(np.concatenate(keys)) if keys else np.zeros(0, dtype=np.int64)
-    row, col = upper_keys // a, upper_keys % a
-    off = row != col
-    full = np.unique(np.concatenate([upper_keys, col[off] * a + row[off]]))
-    indptr = np.zeros(a + 1, dtype=np.int64)
-    np.add.at(indptr, full // a + 1, 1)
-    blocks_of = [np.searchsorted(full, k).astype(np.int64) for k in keys]
-    frow, fcol = full // a, full % a
+    import scipy.sparse as sp
+
+    if rows:
+        ptr = np.concatenate([p[1:] - p[0] + off for p, off in _offsets(rows)])
+        ptr = np.r_[0, ptr]
+        members = np.concatenate([c for _, c in rows])
+    else:
+        ptr, members = np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    T = sp.csr_matrix(
+        (np.ones(len(members), dtype=np.float32), members, ptr), shape=(len(ptr) - 1, a)
+    )
+    P = sp.csr_matrix(T.T @ T)
+    P.sort_indices()
+    indptr = P.indptr.astype(np.int64)
+    fcol = P.indices.astype(np.int64)
+    frow = np.repeat(np.arange(a, dtype=np.int64), np.diff(indptr))
     lower = np.flatnonzero(frow > fcol)
-    upper = np.searchsorted(full, fcol[lower] * a + frow[lower])
-    return np.cumsum(indptr), fcol, blocks_of, lower, upper
+    # the transpose of block (k, l), k > l: block (l, k), found in block row l
+    full = frow * a + fcol
+    upper = np.searchsorted(full, fcol[lower] * a + frow[lower]).astype(np.int64)
+    return indptr, fcol, lower, upper
+
+
+def _offsets(rows: list):
+    """Every factor's ``ptr`` with the entries before it: its rows' starts in the stack."""
+    off = 0
+    for ptr, members in rows:
+        yield ptr, off
+        off += len(members)
 
 
 @nb.njit(cache=True)
-def project(indptr, indices, data, weights, ptr, slot, pair_ptr, pair_block, B, blocks):
+def project(indptr, indices, data, weights, ptr, clusters, slot, bptr, bcols, B, blocks):
     """Add ``Σ_r w_r (J_r A)ᵀ (J_r A)`` into ``blocks`` (b, w, w): the blocks on and above
     the diagonal only (the caller copies the transposes below it).
 
@@ -149,12 +150,11 @@ def project(indptr, indices, data, weights, ptr, slot, pair_ptr, pair_block, B, 
         ``J`` in CSR form, shape (r + 1,), (nnz,), (nnz,); columns ``3 v + c``.
     weights : ndarray, shape (r,)
         Signed row weights ``s w``.
-    ptr, slot : ndarray of int64
+    ptr, clusters, slot : ndarray
         From :func:`row_clusters`.
-    pair_ptr : ndarray of int64
-        From :func:`pair_keys`.
-    pair_block : ndarray of int64
-        From :func:`block_pattern`.
+    bptr, bcols : ndarray of int64
+        ``A_c``'s block pattern (:func:`block_pattern`); the block of a
+        row's cluster pair is found in it by bisection.
     B : ndarray, shape (n, 3, w)
         Every vertex's motions (any values at a fixed vertex: never read).
     blocks : ndarray, shape (b, w, w)
@@ -180,11 +180,22 @@ def project(indptr, indices, data, weights, ptr, slot, pair_ptr, pair_block, B, 
             x = data[p]
             for k in range(w):
                 JA[s, k] += x * B[v, c, k]
-        t = pair_ptr[r]
+        first = ptr[r]
         for i in range(q):
+            # the row's clusters ascend: each pair's block lies past the one before
+            lo = bptr[clusters[first + i]]
+            end = bptr[clusters[first + i] + 1]
             for j in range(i, q):
-                b = pair_block[t]
-                t += 1
+                target = clusters[first + j]
+                hi = end
+                while lo < hi:
+                    mid = (lo + hi) // 2
+                    if bcols[mid] < target:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                b = lo
+                lo += 1
                 for k in range(w):
                     y = wr * JA[i, k]
                     if y != 0.0:
@@ -302,4 +313,41 @@ def rotation_factor(indptr, indices, ldata, R, delta, E, rest, own_own, own_othe
                 base = 9 * start + 3 * cc * count + 3 * (p - start)
                 for a in range(3):
                     out[base + a] = N[a, cc]
+    return out
+
+
+@nb.njit(cache=True)
+def motion_rows(indptr, indices, data, ptr, slot, B):
+    """The values of ``J A``: every row of ``J`` on its clusters' motions.
+
+    Row ``r`` of ``J A`` has ``w`` entries per cluster it touches, at
+    columns ``w k .. w k + w − 1`` for its clusters ``k`` (ascending): CSR
+    with ``indptr = w ptr``.
+
+    Parameters
+    ----------
+    indptr, indices, data : ndarray
+        ``J`` in CSR form, shape (r + 1,), (nnz,), (nnz,); columns ``3 v + c``.
+    ptr, slot : ndarray
+        From :func:`row_clusters`.
+    B : ndarray, shape (n, 3, w)
+        Every vertex's motions (never read at a fixed vertex).
+
+    Returns
+    -------
+    ndarray, shape (w ptr[-1],)
+    """
+    w = B.shape[2]
+    out = np.zeros(w * ptr[-1])
+    for r in range(len(ptr) - 1):
+        base = w * ptr[r]
+        for p in range(indptr[r], indptr[r + 1]):
+            s = slot[p]
+            if s < 0:
+                continue
+            v = indices[p] // 3
+            c = indices[p] - 3 * v
+            x = data[p]
+            for k in range(w):
+                out[base + w * s + k] += x * B[v, c, k]
     return out

@@ -42,7 +42,7 @@ from scipy.sparse import get_index_dtype
 from .linsolve import FixedQuadratic
 from .terms import ROTATION_REGULARISATION, LocalState, ShapeTerm, SmoothJoinTerm, StretchTerm
 
-__all__ = ["gauss_newton", "gauss_newton_factors", "dofs", "NewtonModel"]
+__all__ = ["gauss_newton", "gauss_newton_factors", "factor_entries", "dofs", "NewtonModel"]
 
 
 def _cross(c: np.ndarray) -> np.ndarray:
@@ -253,6 +253,30 @@ def gauss_newton_factors(terms: list, state: LocalState, n: int, cache: dict | N
         else:
             parts.append((_kron3(term.K, cache=cache), np.repeat(term.weights, 3), 1.0))
     return parts
+
+
+def factor_entries(term) -> int:
+    """Stored entries of ``term``'s factors in :func:`gauss_newton_factors`, from its patterns.
+
+    Counted without building them: three per entry of the term's operator
+    ``K`` in each factor (``K ⊗ I₃`` or rows ``K_r ⊗ m_r``) — one factor,
+    four for the stretch term — and nine per entry of the Laplacian ``L``
+    for the eliminated rotations of a rotation-aware shape term.
+
+    Parameters
+    ----------
+    term : Term
+
+    Returns
+    -------
+    int
+    """
+    nnz = sp.csr_matrix(term.K).nnz
+    if isinstance(term, StretchTerm):
+        return 4 * 3 * nnz
+    if isinstance(term, ShapeTerm) and term.rotation_aware:
+        return 3 * nnz + 9 * sp.csr_matrix(term.L).nnz
+    return 3 * nnz
 
 
 def gauss_newton(terms: list, state: LocalState, n: int) -> sp.csr_matrix:

@@ -266,7 +266,11 @@ class JoinOptions:
         (:data:`igljoin.twolevel.AUTO_MODEL`): fewer iterations on tubes
         too (203 / 230 against 486 / 746 at 40k / 100k) and less time on
         tubes and patches from 20k on (0.4–0.96 × ``P``'s iteration); with
-        ``acceleration=0`` it is the factored form.
+        ``acceleration=0`` it is the factored form, and so it is when the
+        coarse model would hold more than
+        :data:`igljoin.twolevel.MAX_MODEL_ENTRIES` entries (counted before
+        it is built), where ``"two-level"`` is refused with an
+        ``OptionsError``.
     linear_solver : {"auto", "igl", "cholespy", "pardiso"}
         Sparse Cholesky backend of the global step: libigl's
         ``min_quad_with_fixed`` (always available), cholespy (the

@@ -39,8 +39,11 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from .linsolve import FixedQuadratic, PardisoRefactor, available_backends
-from .newton import dofs, gauss_newton_factors
+from . import coarse_kernels as ck
+from .errors import OptionsError
+from .linsolve import AugmentedQuadratic, FixedQuadratic, PardisoRefactor, available_backends
+from .newton import dofs, factor_entries, gauss_newton_factors
+from .terms import ShapeTerm
 
 __all__ = [
     "clusters",
@@ -50,12 +53,39 @@ __all__ = [
     "preferred_model",
     "AUTO_FROM_VERTICES",
     "AUTO_MODEL",
+    "MAX_MODEL_ENTRIES",
 ]
 
 # relative ridge added to the coarse matrix: a cluster of three nearly collinear vertices
 # has a nearly free rotation about their line; 1e-10 of the mean diagonal keeps its
 # factorization finite without changing any other coarse mode measurably
 _RIDGE = 1e-10
+
+#: Largest number of entries the model may hold (:attr:`TwoLevelModel.model_entries`: the
+#: factors of the Gauss–Newton model, :func:`igljoin.newton.factor_entries`, and the coarse
+#: system, :attr:`TwoLevelModel.coarse_entries`), counted from the patterns before any of it
+#: is built. Measured on tubes with Pardiso, the first build peaks 36-39 bytes per entry
+#: above the solver's own memory (100k guest vertices: 26.7 M entries, 0.97 GB; 300k:
+#: 87 M, 3.4 GB; the 1M tube counts 340 M, ~13 GB over the solver's 8 GB: its build was
+#: stopped at 16 GB in all); 2e8 entries are ~7.5 GB. Past it ``preconditioner="auto"``
+#: keeps the factored ``P`` and ``"two-level"`` is refused.
+MAX_MODEL_ENTRIES = 200_000_000
+
+# a term whose rows reach this many clusters on average (the smooth join's band rows:
+# 82 at 100k guest vertices, 222 at 300k) is kept as rows of J A beside A_c's local part
+# (an augmented system) instead of being assembled into A_c, where each row would
+# couple all its clusters' pairs
+_WIDE_CLUSTERS = 8
+
+
+class _CoarseAugmented(AugmentedQuadratic):
+    """The augmented factorization of ``A_c = S + Uᵀ W U``, checked at ``A_c``'s accuracy."""
+
+    #: the ridge of 1e-10 leaves ``A_c`` a condition number up to ~1e10, so a sound
+    #: factorization may leave a probe residual up to ~1e10 × 2.2e-16 ≈ 2e-6 (measured
+    #: 1.6e-8 on a 100k tube, as the assembled ``A_c``'s own factorization leaves); a
+    #: singular system whose zero pivots were perturbed leaves one of order 1
+    PROBE_RESIDUAL = 1e-4
 
 
 def clusters(X: np.ndarray, graph: sp.spmatrix, size: int) -> np.ndarray:
@@ -251,10 +281,26 @@ class TwoLevelModel:
     203 / 230 against 199 / 342 / 486 / 746). A rebuild computes
     values only — the patterns of the factors, of ``A_c`` and Pardiso's
     analysis of ``A_c`` are the first build's — 0.1 s at 10k and 0.5 s at
-    40k guest vertices. Rebuilds in the first iterations, while the guest
-    still moves far, led the paper's longer patch (compressed into its
-    hole) to another stationary point 1 % higher in energy;
+    40k guest vertices (with band rows kept apart, below, the augmented
+    system is analysed anew: 2 s at 100k, 8 s at 300k). Rebuilds in the
+    first iterations, while the guest still moves far, led the paper's
+    longer patch (compressed into its hole) to another stationary point 1 %
+    higher in energy;
     ``first_rebuild=6`` keeps it at the default's minimum.
+
+    A term whose rows each reach many clusters — the smooth join's band
+    rows, ~14k guest vertices each on a 1M-vertex tube — would make ``A_c``
+    dense among the band's clusters (``(J A)ᵀ W (J A)`` couples every
+    cluster pair a row reaches) and its factorization denser still. With
+    Pardiso such a term's rows ``J A`` (one per band row, ``w`` entries per
+    cluster it reaches) are kept beside the rest ``S`` of ``A_c`` and the
+    augmented system ``[[S, (J A)ᵀ], [J A, −W⁻¹]]`` is factored instead
+    (:class:`igljoin.linsolve.AugmentedQuadratic`): the same ``A_c⁻¹``,
+    without the dense block. Before anything is built, the entries the coarse
+    system and the model's factors will hold are counted
+    (:attr:`model_entries`); above :data:`MAX_MODEL_ENTRIES` the model is
+    refused (an ``OptionsError``) or, with ``fall_back``, stays the factored
+    ``P`` (:attr:`fallback` says why).
 
     Parameters
     ----------
@@ -280,6 +326,10 @@ class TwoLevelModel:
         Rebuilds allowed after the first build (``None``: no limit).
     first_rebuild : int
         Earliest iteration at which a rebuild is made.
+    fall_back : bool
+        When the model would hold more than :data:`MAX_MODEL_ENTRIES`
+        entries: keep the factored ``P`` alone (``True``, what
+        ``preconditioner="auto"`` asks) instead of raising ``OptionsError``.
 
     Attributes
     ----------
@@ -292,6 +342,14 @@ class TwoLevelModel:
     seconds : dict
         ``clusters``, ``model`` (the factored Gauss–Newton model), ``coarse``
         (``Aᵀ H A``) and ``factor`` times, summed over the builds.
+    coarse_entries : int or None
+        Entries of the coarse system counted at the first refresh (an upper
+        bound with band rows kept apart).
+    model_entries : int or None
+        Those and the Gauss–Newton model's factors' entries.
+    fallback : str or None
+        Why the coarse correction was not built (``fall_back`` and too many
+        entries): the model is then ``P⁻¹`` alone; ``None`` otherwise.
     """
 
     def __init__(
@@ -303,6 +361,7 @@ class TwoLevelModel:
         rebuild_angle: float | None = None,
         max_rebuilds: int | None = None,
         first_rebuild: int = 1,
+        fall_back: bool = False,
     ):
         self.solver = solver
         self.cluster_size = int(cluster_size)
@@ -311,6 +370,10 @@ class TwoLevelModel:
         self.rebuild_angle = None if rebuild_angle is None else float(rebuild_angle)
         self.max_rebuilds = None if max_rebuilds is None else int(max_rebuilds)
         self.first_rebuild = int(first_rebuild)
+        self.fall_back = bool(fall_back)
+        self.fallback = None
+        self.coarse_entries = None
+        self.model_entries = None
         self.built_at = []
         self.free_dofs = dofs(solver.free)
         self.labels = None
@@ -335,6 +398,8 @@ class TwoLevelModel:
         quasi-Newton memory, of which there is none yet).
         """
         first = self.labels is None
+        if self.fallback is not None:
+            return False
         if not first:
             if (
                 self.rebuild_angle is None
@@ -355,8 +420,20 @@ class TwoLevelModel:
             self.labels = clusters(X, graph, self.cluster_size)
             self._vertex_labels = np.full(ls.n, -1, dtype=np.int64)
             self._vertex_labels[ls.free] = self.labels
+            self._wide = self._count(int(self.labels.max()) + 1, 9 if self.bending else 6)
+            if self.model_entries > MAX_MODEL_ENTRIES:
+                self.seconds["clusters"] += time.perf_counter() - t0
+                message = self._too_large()
+                if not self.fall_back:
+                    raise OptionsError(message)
+                self.fallback = message
+                return False
         t1 = time.perf_counter()
-        self.factors = gauss_newton_factors(ls.terms, state, ls.n, self._cache)
+        self.factors, self._factor_wide = [], []
+        for term, wide in zip(ls.terms, self._wide):
+            part = gauss_newton_factors([term], state, ls.n, self._cache)
+            self.factors += part
+            self._factor_wide += [wide] * len(part)
         t2 = time.perf_counter()
         blocks = _rigid_blocks(X, self.labels)
         if self.bending:
@@ -364,9 +441,9 @@ class TwoLevelModel:
         a = int(self.labels.max()) + 1
         self.A = _cluster_columns(blocks, self.labels, a)
         self.At = sp.csr_matrix(self.A.T)
-        Ac = self._project(blocks, a)
+        coarse = self._project(blocks, a)
         t3 = time.perf_counter()
-        self.coarse_factor = self._factor(Ac)
+        self.coarse_factor = self._factor(*coarse)
         self.factorizations += 1
         self.built_at.append(int(iteration))
         if state.rotations is not None:
@@ -376,8 +453,84 @@ class TwoLevelModel:
             self.seconds[key] += dt
         return first
 
-    def _factor(self, Ac: sp.csr_matrix):
+    def _augmented(self) -> bool:
+        """Whether wide terms may be kept apart (the augmented system needs Pardiso)."""
+        ls = self.solver
+        return ls.linear_solver in ("auto", "pardiso") and "pardiso" in available_backends()
+
+    def _count(self, a: int, w: int) -> list:
+        """Which terms are wide; sets the entries counted from the terms' patterns.
+
+        Only the operators' patterns and the clusters are read: ``A_c``'s
+        local blocks are those of ``Tᵀ T`` for the clusters' incidence ``T``
+        of the local rows (:func:`igljoin.coarse_kernels.block_pattern`),
+        ``w²`` entries each; a wide term adds ``w`` entries per cluster each
+        of its rows reaches, times 3 (at most three factor rows per row).
+
+        Returns
+        -------
+        list of bool
+            Per term of the solver: kept as rows of ``J A``.
+        """
+        augmented = self._augmented()
+        local, wide, wide_entries = [], [], 0
+        for term in self.solver.terms:
+            patterns = [sp.csr_matrix(term.K)]
+            if isinstance(term, ShapeTerm) and term.rotation_aware:
+                patterns.append(sp.csr_matrix(term.L))
+            rows = [ck.row_clusters(P.indptr, P.indices, self._vertex_labels, 1) for P in patterns]
+            reach = sum(len(r[1]) for r in rows)
+            count = sum(P.shape[0] for P in patterns)
+            # the eliminated rotations' factor enters with a minus sign: never kept apart
+            keep_apart = (
+                augmented
+                and not isinstance(term, ShapeTerm)
+                and reach >= _WIDE_CLUSTERS * max(count, 1)
+            )
+            wide.append(bool(keep_apart))
+            if keep_apart:
+                wide_entries += 3 * w * reach
+            else:
+                local += [(ptr, members) for ptr, members, _ in rows]
+        blocks = len(ck.block_pattern(local, a)[1])
+        self.coarse_entries = int(w * w * blocks + wide_entries)
+        self.model_entries = self.coarse_entries + sum(factor_entries(t) for t in self.solver.terms)
+        return wide
+
+    def _too_large(self) -> str:
+        """The refusal's message: the count, the limit and the ways out."""
+        pardiso = (
+            ""
+            if self._augmented()
+            else "linear_solver='auto' with Pardiso installed (the smooth join's band rows "
+            "are then kept out of the coarse matrix), "
+        )
+        return (
+            f"the two-level preconditioner's model would hold {self.model_entries:,} entries "
+            f"(its coarse system {self.coarse_entries:,}), more than "
+            f"igljoin.twolevel.MAX_MODEL_ENTRIES = {MAX_MODEL_ENTRIES:,} (about "
+            f"{38 * self.model_entries / 1e9:.0f} GB at its first build): use "
+            "preconditioner='factored' (or 'auto', which then keeps the factored form), "
+            f"{pardiso}or raise igljoin.twolevel.MAX_MODEL_ENTRIES"
+        )
+
+    def coarse_matrix(self) -> sp.csr_matrix:
+        """``A_c`` assembled, shape (w a, w a) — for checks on small meshes.
+
+        With wide terms kept apart it is formed here from the augmented
+        factorization's parts, ``S + (J A)ᵀ W (J A)``.
+        """
+        f = self.coarse_factor
+        if isinstance(f, AugmentedQuadratic):
+            return sp.csr_matrix(f.Sff + f.Kft @ sp.diags(f.cw) @ f.Kf)
+        return f.Qff
+
+    def _factor(self, Ac: sp.csr_matrix, U=None, weights=None):
         """Factor ``A_c``: Pardiso reusing its first analysis when it may be used.
+
+        With wide rows ``U = J A`` (weights ``W``) ``A_c`` is ``S + Uᵀ W U``
+        for the local part ``S`` passed as ``Ac``: the augmented system is
+        factored instead (analysis and all, at every build).
 
         ``A_c``'s pattern is the same at every build, so the fill-reducing
         order and the symbolic factorization of the first build serve all
@@ -388,56 +541,88 @@ class TwoLevelModel:
         it anew.
         """
         ls = self.solver
-        if ls.linear_solver not in ("auto", "pardiso") or "pardiso" not in available_backends():
+        if U is not None:
+            return _CoarseAugmented(Ac, U, weights, 1.0, np.zeros(0, dtype=np.int64))
+        if not self._augmented():
             return FixedQuadratic(Ac, np.zeros(0, dtype=np.int64), ls.linear_solver)
         factor = getattr(self, "coarse_factor", None)
         if isinstance(factor, PardisoRefactor) and factor.refactor(Ac):
             return factor
         return PardisoRefactor(Ac)
 
-    def _project(self, blocks: np.ndarray, a: int) -> sp.csr_matrix:
+    def _project(self, blocks: np.ndarray, a: int) -> tuple:
         """``A_c = Aᵀ H A`` from the factors, plus the ridge; shape (w a, w a).
 
         The patterns of the factors and of ``A_c`` are found at the first
         build (and again only if a factor's pattern changed); a rebuild
         recomputes values only (:func:`igljoin.coarse_kernels.project`).
-        """
-        from . import coarse_kernels as ck
+        The wide terms' factors are not projected but kept as rows ``J A``
+        (:func:`igljoin.coarse_kernels.motion_rows`).
 
+        Returns
+        -------
+        S : scipy.sparse.csr_matrix, shape (w a, w a)
+            ``A_c`` (its local part with wide terms), ridge included.
+        U : scipy.sparse.csr_matrix, shape (rows, w a), or None
+            The wide terms' rows ``J A``.
+        weights : ndarray, shape (rows,), or None
+        """
         mats = [sp.csr_matrix(J) for J, _, _ in self.factors]
         pattern = getattr(self, "_pattern", None)
         same = pattern is not None and len(pattern[0]) == len(mats)
+        # the cached factors share their index arrays from build to build: no copies kept
         same = same and all(
-            np.array_equal(J.indptr, p) and np.array_equal(J.indices, i)
+            (J.indptr is p or np.array_equal(J.indptr, p))
+            and (J.indices is i or np.array_equal(J.indices, i))
             for J, p, i in zip(mats, pattern[0], pattern[1])
         )
         if not same:
-            # per factor: the clusters each row reaches and its cluster pairs' keys; the
-            # blocks of A_c are their union
+            # per factor: the clusters each row reaches; the blocks of A_c are the cluster
+            # pairs some local row reaches
             rows = [ck.row_clusters(J.indptr, J.indices, self._vertex_labels) for J in mats]
-            keys = [ck.pair_keys(ptr, members, a) for ptr, members, _ in rows]
-            bptr, bcols, blocks_of, lower, upper = ck.block_pattern([k for k, _ in keys], a)
+            local = [(r[0], r[1]) for r, wide in zip(rows, self._factor_wide) if not wide]
             self._pattern = (
-                [J.indptr.copy() for J in mats],
-                [J.indices.copy() for J in mats],
-                [(r[0], r[2], k[1], b) for r, k, b in zip(rows, keys, blocks_of)],
-                (bptr, bcols, lower, upper),
+                [J.indptr for J in mats],
+                [J.indices for J in mats],
+                rows,
+                ck.block_pattern(local, a),
             )
         bptr, bcols, lower, upper = self._pattern[3]
         w = blocks.shape[2]
         B = np.zeros((self.solver.n, 3, w))
         B[self.solver.free] = blocks
         out = np.zeros((len(bcols), w, w))
-        for (J, wf, sign), (ptr, slot, pair_ptr, pair_block) in zip(self.factors, self._pattern[2]):
-            J = sp.csr_matrix(J)
+        wide_rows, wide_weights = [], []
+        for J, (_, wf, sign), (ptr, members, slot), wide in zip(
+            mats, self.factors, self._pattern[2], self._factor_wide
+        ):
             weights = sign * np.asarray(wf, dtype=np.float64)
+            if wide:
+                values = ck.motion_rows(J.indptr, J.indices, J.data, ptr, slot, B)
+                cols = (w * members[:, None] + np.arange(w)[None, :]).ravel()
+                wide_rows.append(
+                    sp.csr_matrix((values, cols, w * ptr), shape=(len(ptr) - 1, w * a))
+                )
+                wide_weights.append(weights)
+                continue
             ck.project(
-                J.indptr, J.indices, J.data, weights, ptr, slot, pair_ptr, pair_block, B, out
+                J.indptr, J.indices, J.data, weights, ptr, members, slot, bptr, bcols, B, out
             )
         out[lower] = out[upper].transpose(0, 2, 1)
         Ac = sp.bsr_matrix((out, bcols, bptr), shape=(w * a, w * a)).tocsr()
-        Ac.setdiag(Ac.diagonal() + _RIDGE * Ac.diagonal().mean())
-        return Ac
+        diagonal = Ac.diagonal()
+        U = weights = None
+        if wide_rows:
+            U = sp.csr_matrix(sp.vstack(wide_rows, format="csr"))
+            weights = np.concatenate(wide_weights)
+            # the diagonal of Uᵀ W U: the ridge is relative to the whole A_c's
+            diagonal = diagonal + np.bincount(
+                U.indices,
+                U.data**2 * np.repeat(weights, np.diff(U.indptr)),
+                minlength=w * a,
+            )
+        Ac.setdiag(Ac.diagonal() + _RIDGE * diagonal.mean())
+        return Ac, U, weights
 
     def _coarse(self, v: np.ndarray) -> np.ndarray:
         """``A A_c⁻¹ Aᵀ v`` for ``v`` of shape (3 n_free,)."""
@@ -457,6 +642,8 @@ class TwoLevelModel:
         fine = self.solver.factor.solve_free
         v = np.ascontiguousarray(v, dtype=np.float64)
         flat = v.reshape(-1)
+        if self.fallback is not None:
+            return fine(v)
         if not self.balancing:
             return fine(v) + self._coarse(flat).reshape(v.shape)
         c = self._coarse(flat)
@@ -492,8 +679,11 @@ def preferred_model(solver, options):
         ``None`` (the factored ``P`` alone) for ``"factored"``, for
         ``acceleration=0`` and for ``"auto"`` below
         :data:`AUTO_FROM_VERTICES` free vertices; the rigid coarse space
-        built once for ``"two-level"``; :data:`AUTO_MODEL` for ``"auto"``
-        from :data:`AUTO_FROM_VERTICES` on.
+        built once for ``"two-level"`` (refused with ``OptionsError`` at
+        its first refresh past :data:`MAX_MODEL_ENTRIES`); :data:`AUTO_MODEL`
+        for ``"auto"`` from :data:`AUTO_FROM_VERTICES` on, which past
+        :data:`MAX_MODEL_ENTRIES` stays ``P`` alone and says so in its
+        ``fallback``.
     """
     choice = options.preconditioner
     if options.acceleration == 0 or choice == "factored":
@@ -501,5 +691,5 @@ def preferred_model(solver, options):
     if choice == "two-level":
         return TwoLevelModel(solver)
     if len(solver.free) >= AUTO_FROM_VERTICES:
-        return TwoLevelModel(solver, **AUTO_MODEL)
+        return TwoLevelModel(solver, **AUTO_MODEL, fall_back=True)
     return None

@@ -1,0 +1,108 @@
+"""The two-level model's coarse system: band rows kept apart; a size guard before the build."""
+
+import numpy as np
+import pytest
+
+import igljoin
+from igljoin import linsolve, newton, phantoms, twolevel
+from igljoin.terms import SmoothJoinTerm
+
+pardiso = pytest.mark.skipif(
+    "pardiso" not in linsolve.available_backends(), reason="the augmented system needs Pardiso"
+)
+
+
+@pytest.fixture(scope="module")
+def patch():
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.5)
+    return s, igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+
+
+def _start(solver):
+    return solver.solver.local(solver.initial_guess())[0]
+
+
+@pardiso
+@pytest.mark.parametrize("bending", [False, True])
+def test_band_rows_kept_apart_give_the_same_coarse_model(patch, monkeypatch, bending):
+    _, solver = patch
+    ls = solver.solver
+    state = _start(solver)
+    assembled = twolevel.TwoLevelModel(ls, cluster_size=5, bending=bending)
+    assembled.refresh(state, 1)
+    # the small patch's band rows reach too few clusters for the real threshold: with
+    # clusters of 5 they reach 3.2 on average, the shape and stretch rows (one-rings,
+    # edges) 1.4 and 1.2, so a threshold of 2 keeps the band rows apart alone
+    monkeypatch.setattr(twolevel, "_WIDE_CLUSTERS", 2)
+    apart = twolevel.TwoLevelModel(ls, cluster_size=5, bending=bending)
+    apart.refresh(state, 1)
+    wide = [isinstance(t, SmoothJoinTerm) for t in ls.terms]
+    assert apart._wide == wide and any(wide)
+    assert isinstance(apart.coarse_factor, linsolve.AugmentedQuadratic)
+    H = newton.gauss_newton(ls.terms, state, ls.n)
+    free = newton.dofs(ls.free)
+    expected = (apart.A.T @ H[free][:, free] @ apart.A).toarray()
+    got = apart.coarse_matrix().toarray()
+    # rounding (1e-12 of the largest entry) plus the ridge of 1e-10 of the mean diagonal
+    assert np.abs(got - expected).max() <= 1e-9 * np.abs(expected).max()
+    # the count made before the build never falls short of what the factorization holds
+    held = apart.coarse_factor.Sff.nnz + apart.coarse_factor.Kf.nnz
+    assert apart.coarse_entries >= held
+    v = np.random.default_rng(0).standard_normal((len(ls.free), 3))
+    a, b = assembled.solve_free(v), apart.solve_free(v)
+    # two factorizations of the same A_c, whose ridge allows a condition number near
+    # 1e10: their solutions agree to ~1e-7 of the coarse part, far below 1e-5
+    assert np.linalg.norm(a - b) <= 1e-5 * np.linalg.norm(a)
+
+
+def test_the_count_is_the_coarse_matrix_held(patch):
+    _, solver = patch
+    model = twolevel.TwoLevelModel(solver.solver, bending=True)
+    model.refresh(_start(solver), 1)
+    # the band rows of the small patch reach a few clusters: all assembled, every entry
+    # of the coarse matrix counted
+    assert not any(model._wide)
+    assert model.coarse_entries == model.coarse_matrix().nnz
+
+
+def test_the_factors_entries_are_counted_from_the_patterns(patch):
+    _, solver = patch
+    ls = solver.solver
+    state = _start(solver)
+    for term in ls.terms:
+        held = sum(J.nnz for J, _, _ in newton.gauss_newton_factors([term], state, ls.n))
+        assert newton.factor_entries(term) == held
+
+
+def test_a_coarse_system_too_large_is_refused_before_it_is_built(patch, monkeypatch):
+    s, solver = patch
+    ls = solver.solver
+    monkeypatch.setattr(twolevel, "MAX_MODEL_ENTRIES", 100)
+
+    def expensive(*args, **kwargs):
+        raise AssertionError("the model was built past the guard")
+
+    monkeypatch.setattr(twolevel, "gauss_newton_factors", expensive)
+    model = twolevel.TwoLevelModel(ls)
+    with pytest.raises(igljoin.OptionsError, match="MAX_MODEL_ENTRIES.*preconditioner='factored'"):
+        model.refresh(_start(solver), 1)
+    assert model.model_entries > 100 and model.factorizations == 0
+    # the join with the explicit option is refused with the same message
+    fresh = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    with pytest.raises(igljoin.OptionsError, match="model would hold"):
+        fresh.solve(preconditioner="two-level")
+
+
+def test_auto_keeps_the_factored_form_when_the_coarse_system_is_too_large(patch, monkeypatch):
+    s, _ = patch
+    solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    default = solver.solve()
+    monkeypatch.setattr(twolevel, "AUTO_FROM_VERTICES", 0)
+    monkeypatch.setattr(twolevel, "MAX_MODEL_ENTRIES", 100)
+    model = twolevel.preferred_model(solver.solver, igljoin.JoinOptions(preconditioner="auto"))
+    assert not model.refresh(_start(solver), 1)
+    assert "MAX_MODEL_ENTRIES" in model.fallback and model.factorizations == 0
+    auto = solver.solve(preconditioner="auto")
+    # the fallback is P alone: the very iterations of the factored form
+    assert auto.iterations == default.iterations
+    assert auto.energy[-1] == default.energy[-1]
