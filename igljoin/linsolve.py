@@ -104,7 +104,6 @@ __all__ = [
     "PARDISO_FROM_NNZ",
     "AugmentedQuadratic",
     "FixedQuadratic",
-    "PardisoRefactor",
     "available_backends",
     "resolve_backend",
 ]
@@ -596,61 +595,3 @@ class AugmentedQuadratic(_FixedRows):
         Products with the factors only (shape (n_free, k)).
         """
         return self.Sfb @ bc + self.Kft @ (self.cw[:, None] * (self.Kb @ bc))
-
-
-class PardisoRefactor:
-    """A Pardiso factorization whose analysis is reused for new values of the same pattern.
-
-    Parameters
-    ----------
-    A : scipy.sparse.csr_matrix, shape (k, k)
-        Symmetric positive definite, sorted indices, every diagonal entry
-        stored.
-
-    Attributes
-    ----------
-    Qff : scipy.sparse.csr_matrix, shape (k, k)
-        The matrix factored (as :class:`FixedQuadratic`
-        names it).
-    backend : str
-    """
-
-    backend = "pardiso"
-
-    def __init__(self, A: sp.csr_matrix):
-        self.Qff = A
-        self._pattern = (A.indptr.copy(), A.indices.copy())
-        rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
-        self._upper = A.indices >= rows
-        try:
-            self._pardiso = _Pardiso(A)
-        except _PardisoError as exc:
-            raise SolveError(_NOT_FACTORED) from exc
-        # Pardiso keeps the sorted upper triangle, every diagonal entry stored: the same
-        # entries in the same order when A_c stores its diagonal (else no reuse)
-        self._reusable = len(self._pardiso.a) == int(self._upper.sum())
-
-    def refactor(self, A: sp.csr_matrix) -> bool:
-        """Factor the new values of the same pattern; ``False`` if the pattern differs."""
-        same = (
-            self._reusable
-            and np.array_equal(A.indptr, self._pattern[0])
-            and np.array_equal(A.indices, self._pattern[1])
-        )
-        if not same:
-            return False
-        p = self._pardiso
-        p.a[:] = A.data[self._upper]
-        one = np.zeros(1)
-        try:
-            # phase 22: the numeric factorization only, on the analysis kept in p.pt
-            args = (p.lib, p.itype, p.pt, p.iparm, 22, p.n, p.a, p.ia, p.ja)
-            _pardiso_call(*args, 1, one, one.copy(), p.mtype)
-        except _PardisoError as exc:
-            raise SolveError(_NOT_FACTORED) from exc
-        self.Qff = A
-        return True
-
-    def solve_free(self, b: np.ndarray) -> np.ndarray:
-        """``A_c⁻¹ b`` for ``b`` of shape (k, m); returns shape (k, m)."""
-        return np.ascontiguousarray(self._pardiso.solve(b))

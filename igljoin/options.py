@@ -247,30 +247,31 @@ class JoinOptions:
         the factored quadratic form, so its first step is the plain step, and
         a line search accepts only steps that lower the energy: it converges
         to the same minimum as the plain iteration, in far fewer iterations.
-    preconditioner : {"factored", "two-level", "auto"}
-        Initial inverse Hessian of the quasi-Newton steps: the factored
-        quadratic form alone (default), or with a coarse correction that
-        knows the rotation (bending) modes — the Gauss–Newton model on the
-        rigid motions of clusters of about 20 vertices
+    preconditioner : {"auto", "factored", "two-level"}
+        Initial inverse Hessian of the quasi-Newton steps (the answers are
+        the same minimum; only the iteration count and time differ).
+        ``"factored"``: the factored quadratic form ``P`` alone.
+        ``"two-level"``: ``P`` with a coarse correction that knows the
+        rotation (bending) modes — the Gauss–Newton model on the rigid
+        motions of clusters of about 20 vertices
         (:class:`igljoin.twolevel.TwoLevelModel`), built and factored at the
-        start of every solve. Same minimum; on patch-like guests of 10,000
-        vertices and more it needs 2–3× fewer iterations (46 / 75 against
-        100 / 248 at 10k / 100k) and less time, on long tubes none fewer,
-        and below a few thousand vertices its set-up costs more than it
-        saves (docs/limits.md). It preconditions the quasi-Newton steps, so
-        it needs ``acceleration`` > 0. ``"auto"``: the factored form below
-        :data:`igljoin.twolevel.AUTO_FROM_VERTICES` (20,000) free guest
-        vertices, and from there the coarse correction with three bending
-        motions per cluster as well, rebuilt at the current positions
-        whenever the guest has turned 0.2 rad
+        start of every solve: on patch-like guests of 10,000 vertices and
+        more 2–3× fewer iterations (46 / 75 against 100 / 248 at 10k /
+        100k), on long tubes none fewer, and below a few thousand vertices
+        its set-up costs more than it saves. ``"auto"`` (default):
+        ``"factored"`` below :data:`igljoin.twolevel.AUTO_FROM_VERTICES`
+        (20,000) free guest vertices, and from there the coarse correction
+        with three bending motions per cluster as well, rebuilt at the
+        current positions whenever the guest has turned 0.2 rad
         (:data:`igljoin.twolevel.AUTO_MODEL`): fewer iterations on tubes
         too (203 / 230 against 486 / 746 at 40k / 100k) and less time on
-        tubes and patches from 20k on (0.4–0.96 × ``P``'s iteration); with
-        ``acceleration=0`` it is the factored form, and so it is when the
-        coarse model would hold more than
-        :data:`igljoin.twolevel.MAX_MODEL_ENTRIES` entries (counted before
-        it is built), where ``"two-level"`` is refused with an
-        ``OptionsError``.
+        tubes and patches from 20k on (0.4–0.96 × ``P``'s iteration;
+        docs/limits.md). The coarse corrections precondition the
+        quasi-Newton steps, so with ``acceleration=0`` every choice is the
+        factored form; and so is ``"auto"`` when the coarse model would
+        hold more than :data:`igljoin.twolevel.MAX_MODEL_ENTRIES` entries
+        (counted before it is built), where ``"two-level"`` is refused with
+        an ``OptionsError``.
     linear_solver : {"auto", "igl", "cholespy", "pardiso"}
         Sparse Cholesky backend of the global step: libigl's
         ``min_quad_with_fixed`` (always available), cholespy (the
@@ -309,7 +310,7 @@ class JoinOptions:
     snap_fraction: float = _structural(0.1)
     initial_guess: str = _per_solve("extend")
     acceleration: int = _per_solve(10)
-    preconditioner: str = _per_solve("factored")
+    preconditioner: str = _per_solve("auto")
     linear_solver: str = _structural("auto")
 
     def __post_init__(self) -> None:
@@ -350,7 +351,7 @@ class JoinOptions:
             raise OptionsError(
                 "preconditioner='two-level' preconditions the quasi-Newton steps, which "
                 "acceleration=0 turns off; give acceleration > 0 (the default is "
-                f"{_default('acceleration')}) or leave preconditioner at 'factored'"
+                f"{_default('acceleration')}) or give preconditioner='factored' or 'auto'"
             )
         it = self.max_iterations
         if (

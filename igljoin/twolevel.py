@@ -41,7 +41,7 @@ from scipy.sparse import csgraph
 
 from . import coarse_kernels as ck
 from .errors import OptionsError
-from .linsolve import AugmentedQuadratic, FixedQuadratic, PardisoRefactor, available_backends
+from .linsolve import AugmentedQuadratic, FixedQuadratic, available_backends
 from .newton import dofs, factor_entries, gauss_newton_factors
 from .terms import ShapeTerm
 
@@ -526,29 +526,21 @@ class TwoLevelModel:
         return f.Qff
 
     def _factor(self, Ac: sp.csr_matrix, U=None, weights=None):
-        """Factor ``A_c``: Pardiso reusing its first analysis when it may be used.
+        """Factor ``A_c`` anew (its pattern is the same at every build; its values are not).
 
         With wide rows ``U = J A`` (weights ``W``) ``A_c`` is ``S + Uᵀ W U``
         for the local part ``S`` passed as ``Ac``: the augmented system is
-        factored instead (analysis and all, at every build).
-
-        ``A_c``'s pattern is the same at every build, so the fill-reducing
-        order and the symbolic factorization of the first build serve all
-        rebuilds: only the numeric factorization is redone (at 40k guest
-        vertices 0.17 s against 0.59 s for a whole Pardiso factorization and
-        2.7 s for cholespy's). Without Pardiso (or with ``linear_solver``
-        ``"igl"`` or ``"cholespy"`` asked for), the solver's backend factors
-        it anew.
+        factored instead. Otherwise Pardiso factors ``A_c`` where it may be
+        used (at 40k guest vertices 0.59 s against 2.7 s for cholespy's),
+        else the solver's backend. Pardiso's numeric phase alone on the first
+        build's analysis (0.17 s at 40k) crashed inside MKL on a rebuild of a
+        100k tube's coarse matrix, so every build is a whole factorization.
         """
         ls = self.solver
         if U is not None:
             return _CoarseAugmented(Ac, U, weights, 1.0, np.zeros(0, dtype=np.int64))
-        if not self._augmented():
-            return FixedQuadratic(Ac, np.zeros(0, dtype=np.int64), ls.linear_solver)
-        factor = getattr(self, "coarse_factor", None)
-        if isinstance(factor, PardisoRefactor) and factor.refactor(Ac):
-            return factor
-        return PardisoRefactor(Ac)
+        backend = "pardiso" if self._augmented() else ls.linear_solver
+        return FixedQuadratic(Ac, np.zeros(0, dtype=np.int64), backend)
 
     def _project(self, blocks: np.ndarray, a: int) -> tuple:
         """``A_c = Aᵀ H A`` from the factors, plus the ridge; shape (w a, w a).
