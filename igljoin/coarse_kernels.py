@@ -19,6 +19,19 @@ import numpy as np
 __all__ = ["row_clusters", "block_pattern", "project", "motion_rows", "rotation_factor"]
 
 
+@nb.njit(cache=True, inline="always")
+def _position(out, start, stop, c):
+    """Where ``c`` is, or would go, in the ascending ``out[start:stop]`` (binary search)."""
+    lo, hi = start, stop
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if out[mid] < c:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
 @nb.njit(cache=True)
 def row_clusters(indptr, indices, labels, stride=3):
     """The clusters every row of ``J`` touches and where each entry lands among them.
@@ -54,13 +67,7 @@ def row_clusters(indptr, indices, labels, stride=3):
             if c < 0:
                 continue
             # binary search in the row's ascending list, then insertion
-            lo, hi = start, q
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if out[mid] < c:
-                    lo = mid + 1
-                else:
-                    hi = mid
+            lo = _position(out, start, q, c)
             if lo == q or out[lo] != c:
                 for t in range(q, lo, -1):
                     out[t] = out[t - 1]
@@ -71,14 +78,7 @@ def row_clusters(indptr, indices, labels, stride=3):
             c = labels[indices[p] // stride]
             if c < 0:
                 continue
-            lo, hi = start, q
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if out[mid] < c:
-                    lo = mid + 1
-                else:
-                    hi = mid
-            slot[p] = lo - start
+            slot[p] = _position(out, start, q, c) - start
     return ptr, out[:q].copy(), slot
 
 

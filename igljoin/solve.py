@@ -95,8 +95,8 @@ class IterationResult:
         ``local_steps`` (local steps evaluated, including rejected line-search
         trials), ``back_solves``, ``rejected`` (line-search trials that did not
         decrease the energy enough), ``restarts`` (quasi-Newton memory
-        dropped) and ``model_builds`` (times a ``model`` was built or rebuilt,
-        each dropping the memory too).
+        dropped) and ``model_builds`` (builds and rebuilds of a ``model``
+        during the run).
     """
 
     X: np.ndarray
@@ -341,8 +341,10 @@ class LocalGlobalSolver:
             :class:`igljoin.twolevel.TwoLevelModel`):
             an object with ``refresh(state, iteration) -> bool`` (called
             before every iteration with the current local state; ``True``
-            when the model changed, which drops the quasi-Newton memory) and
-            ``solve_free(v)`` for ``v`` of shape (n_free, 3). The plain
+            when the quasi-Newton memory must be dropped),
+            ``solve_free(v)`` for ``v`` of shape (n_free, 3) and
+            ``factorizations`` (its builds so far: those of this run are
+            ``stats["model_builds"]``). The plain
             fallback step stays ``Q``'s.
 
         Returns
@@ -358,6 +360,7 @@ class LocalGlobalSolver:
             "restarts": 0,
             "model_builds": 0,
         }
+        builds_before = 0 if model is None else model.factorizations
         free, fixed = self.free, self.fixed
         # (b, 3) rows for the compiled scatter (broadcast as ``X[fixed] = bc`` would)
         bc = np.ascontiguousarray(
@@ -408,7 +411,6 @@ class LocalGlobalSolver:
                 t0 = time.perf_counter()
                 if model.refresh(state, it):
                     memory.clear()
-                    stats["model_builds"] += 1
                 clock["model"] += time.perf_counter() - t0
             if acceleration > 0 and memory.size:
                 d = -memory.apply(g, back_solve)
@@ -467,6 +469,8 @@ class LocalGlobalSolver:
         result.X = X
         result.energy = energy
         result.timings = dict(clock)
+        if model is not None:
+            stats["model_builds"] = model.factorizations - builds_before
         result.stats = stats
         return result
 

@@ -117,8 +117,8 @@ def table(kind: str, sizes: list) -> None:
             _row(kind, n, name, res, seconds, e_ref, model.factorizations)
 
 
-#: The model ``time`` compares with ``P``.
-TIMED = dict(bending=True, rebuild_angle=0.2, first_rebuild=6)
+#: The model ``time`` compares with ``P``: the one ``preconditioner="auto"`` uses.
+TIMED = getattr(twolevel, "AUTO_MODEL", dict(bending=True, rebuild_angle=0.2))
 
 
 def timed(kind: str, sizes: list) -> None:

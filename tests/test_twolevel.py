@@ -297,3 +297,17 @@ def test_the_auto_option_joins_with_the_preferred_model_from_its_threshold(monke
     # tolerance: well within the project's 1e-6 requirement)
     gap = abs(auto.energy[-1] - default.energy[-1]) / default.energy[-1]
     assert auto.converged and gap <= 1e-6
+
+
+def test_a_run_counts_its_model_builds_and_rebuilds(patch):
+    ls = patch.solver
+    # a tiny rebuild angle from the first iteration on: the coarse space is rebuilt often
+    model = twolevel.TwoLevelModel(ls, bending=True, rebuild_angle=0.01, first_rebuild=1)
+    run = ls.run(patch.initial_guess(), patch.corr.targets, max_iterations=20, model=model)
+    assert run.stats["model_builds"] == model.factorizations == len(model.built_at)
+    assert run.stats["model_builds"] >= 2
+    # a second run with the same model counts only its own builds
+    again = ls.run(patch.initial_guess(), patch.corr.targets, max_iterations=3, model=model)
+    assert again.stats["model_builds"] == model.factorizations - run.stats["model_builds"]
+    plain = ls.run(patch.initial_guess(), patch.corr.targets, max_iterations=3)
+    assert plain.stats["model_builds"] == 0
