@@ -786,7 +786,7 @@ def _iteration_table(cases: list[dict]) -> list[str]:
         "",
         "*plain*: the paper's local/global iteration (`acceleration=0`) to "
         "`energy_tolerance=1e-12` where affordable; *accelerated*: the solver igljoin uses "
-        "(L-BFGS on the factored preconditioner, default tolerance); *warm re-solve*: "
+        "(L-BFGS with the default preconditioner and tolerance); *warm re-solve*: "
         "after a 1° slider step.",
         "",
         "| case | guest vertices | plain | accelerated | warm re-solve |",
@@ -911,6 +911,11 @@ def main(argv=None) -> int:
         help="run only the cases of these kinds (comma-separated: paper, host, patch, tube) "
         "and replace them in the existing benchmarks.json",
     )
+    ap.add_argument(
+        "--tables",
+        action="store_true",
+        help="rewrite benchmarks.md's tables from the folder's benchmarks.json (no run)",
+    )
     ap.add_argument("--worker", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
@@ -927,6 +932,11 @@ def main(argv=None) -> int:
         sizes.append(1_000_000)
     million_budget = 600.0  # seconds of iteration for the 1M guest (reported if it stops there)
     out_dir = Path(args.out) if args.out else ROOT / ("benchmark-quick" if args.quick else "docs")
+    if args.tables:
+        if not (out_dir / "benchmarks.json").is_file():
+            sys.exit(f"--tables reads {out_dir / 'benchmarks.json'}, which does not exist")
+        _write_tables(out_dir, json.loads((out_dir / "benchmarks.json").read_text()))
+        return 0
     specs = [
         {
             "kind": "paper",
@@ -1011,6 +1021,12 @@ def main(argv=None) -> int:
     results["machine"]["load_average_end"] = os.getloadavg()
     out_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out_dir / "benchmarks.json", json.dumps(results, indent=1))
+    print(_write_tables(out_dir, results))
+    return 0
+
+
+def _write_tables(out_dir: Path, results: dict) -> str:
+    """Write ``benchmarks.md``'s tables for ``results`` (its hand-written head kept)."""
     table = markdown(results)
     md = out_dir / "benchmarks.md"
     if md.exists() and "<!-- benchmark tables -->" in md.read_text():
@@ -1018,8 +1034,7 @@ def main(argv=None) -> int:
         atomic_write_text(md, head + "<!-- benchmark tables -->\n\n" + table)
     else:
         atomic_write_text(md, "# Benchmarks\n\n<!-- benchmark tables -->\n\n" + table)
-    print(table)
-    return 0
+    return table
 
 
 if __name__ == "__main__":
