@@ -186,16 +186,8 @@ def project(indptr, indices, data, weights, ptr, clusters, slot, bptr, bcols, B,
             lo = bptr[clusters[first + i]]
             end = bptr[clusters[first + i] + 1]
             for j in range(i, q):
-                target = clusters[first + j]
-                hi = end
-                while lo < hi:
-                    mid = (lo + hi) // 2
-                    if bcols[mid] < target:
-                        lo = mid + 1
-                    else:
-                        hi = mid
-                b = lo
-                lo += 1
+                b = _position(bcols, lo, end, clusters[first + j])
+                lo = b + 1
                 for k in range(w):
                     y = wr * JA[i, k]
                     if y != 0.0:

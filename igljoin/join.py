@@ -152,7 +152,7 @@ class JoinSolver:
     ``solve(targets, start=previous_result)`` also starts from the previous
     result, which after a small change of the targets needs fewer
     iterations. Along a path of such re-solves (a slider: each solved from
-    the result before) the solver keeps the last ``PATH_LENGTH + 1`` (2)
+    the result before) the solver keeps the last ``PATH_LENGTH + 1``
     results of the path, copies of the guest positions, and predicts the
     next start from their moves (:meth:`warm_start`); an option change that
     rebuilds the factorization forgets them, a change of the iteration
@@ -216,6 +216,9 @@ class JoinSolver:
         self.host_values = HostValues(self.host, self._host_near)
         self.factorizations = 0
         self.last_run = None  # IterationResult of the latest solve (iteration statistics)
+        # the latest solve's coarse model (igljoin.twolevel.TwoLevelModel), None for P alone;
+        # its ``fallback`` says why "auto" kept P where the model would not fit
+        self.last_model = None
         self.timings: dict[str, float] = {"select": time.perf_counter() - t0}
         self._prepare()
 
@@ -326,7 +329,10 @@ class JoinSolver:
         -------
         ndarray, shape (n', 3)
         """
-        X = self._start_positions(start)
+        return self._warm_start(self._start_positions(start), targets)
+
+    def _warm_start(self, X: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """:meth:`warm_start` from checked positions ``X`` (n', 3)."""
         seam = self.corr.seam
         path = self._path_to(X)
         X = path_prediction(X, path[-1 - PATH_LENGTH : -1], seam, targets)
@@ -428,13 +434,14 @@ class JoinSolver:
             X0 = self.initial_guess(bc)
         else:
             start = self._start_positions(start)
-            X0 = self.warm_start(start, bc)
+            X0 = self._warm_start(start, bc)
         t1 = time.perf_counter()
 
         def report(iteration: int, energy: float) -> None:
             elapsed = time.perf_counter() - t1
             progress(SolveProgress(iteration, opt.max_iterations, float(energy), elapsed))
 
+        model = preferred_model(self.solver, opt)
         run = self.solver.run(
             X0,
             bc,
@@ -444,10 +451,10 @@ class JoinSolver:
             scale=self.guest_mean_edge,
             acceleration=opt.acceleration,
             callback=None if progress is None else report,
-            model=preferred_model(self.solver, opt),
+            model=model,
         )
         t2 = time.perf_counter()
-        self.last_run = run
+        self.last_run, self.last_model = run, model
         result = join_result(
             run,
             bc,

@@ -76,6 +76,11 @@ def _kron3(K: sp.spmatrix, H: np.ndarray | None = None, cache: dict | None = Non
         if H is None:
             return hit
         rows, Kdata, cols, indptr, shape = hit
+    elif H is None:
+        out = sp.csr_matrix(sp.kron(sp.csr_matrix(K), sp.eye(3), format="csr"))
+        if cache is not None:
+            cache[key] = out
+        return out
     else:
         K = sp.csr_matrix(K)
         rows = np.repeat(np.arange(K.shape[0]), np.diff(K.indptr))
@@ -86,12 +91,6 @@ def _kron3(K: sp.spmatrix, H: np.ndarray | None = None, cache: dict | None = Non
         if cache is not None:
             # the index type scipy would convert them to on every call
             cols, indptr = _index_arrays(cols, indptr, shape)
-        if H is None:
-            out = sp.csr_matrix(sp.kron(K, sp.eye(3), format="csr"))
-            if cache is not None:
-                cache[key] = out
-            return out
-        if cache is not None:
             cache[key] = (rows, Kdata, cols, indptr, shape)
     data = (Kdata[:, None] * H[rows]).reshape(-1)
     return sp.csr_matrix((data, cols, indptr), shape=shape)

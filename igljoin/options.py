@@ -267,8 +267,9 @@ class JoinOptions:
         too (203 / 230 against 486 / 746 at 40k / 100k) and less time on
         tubes and patches from 20k on (0.4–0.96 × ``P``'s iteration;
         docs/limits.md). The coarse corrections precondition the
-        quasi-Newton steps, so with ``acceleration=0`` every choice is the
-        factored form; and so is ``"auto"`` when the coarse model would
+        quasi-Newton steps: with ``acceleration=0`` ``"auto"`` is the
+        factored form and ``"two-level"`` is refused; ``"auto"`` is the
+        factored form as well when the coarse model would
         hold more than :data:`igljoin.twolevel.MAX_MODEL_ENTRIES` entries
         (counted before it is built), where ``"two-level"`` is refused with
         an ``OptionsError``.

@@ -18,8 +18,9 @@ The coarse matrix ``A_c = Aᵀ H A`` is the model ``H`` projected onto them,
 computed from the model's factored form
 (:func:`igljoin.newton.gauss_newton_factors`) without assembling ``H``, and
 factored (9 a unknowns, a few thousand); both are rebuilt at the current
-iterate when the guest has turned far from where they were built (values
-only: the patterns are the first build's). The initial inverse Hessian of
+iterate when the guest has turned far from where they were built (the
+values only: the patterns are the first build's; the coarse system is then
+factored anew). The initial inverse Hessian of
 the quasi-Newton steps becomes
 
 * additive: ``P⁻¹ + A A_c⁻¹ Aᵀ``, or
@@ -70,6 +71,9 @@ _RIDGE = 1e-10
 #: stopped at 16 GB in all); 2e8 entries are ~7.5 GB. Past it ``preconditioner="auto"``
 #: keeps the factored ``P`` and ``"two-level"`` is refused.
 MAX_MODEL_ENTRIES = 200_000_000
+
+#: Bytes a first build spends per counted entry (the upper end of the 36-39 measured above).
+_BYTES_PER_ENTRY = 39
 
 # a term whose rows reach this many clusters on average (the smooth join's band rows:
 # 82 at 100k guest vertices, 222 at 300k) is kept as rows of J A beside A_c's local part
@@ -279,10 +283,9 @@ class TwoLevelModel:
     grow on the patch (35 / 30 / 41 / 55 at 10k / 20k / 40k / 100k against
     100 / 134 / 228 / 248), and on the tube they grow more slowly (73 / 162 /
     203 / 230 against 199 / 342 / 486 / 746). A rebuild computes
-    values only — the patterns of the factors, of ``A_c`` and Pardiso's
-    analysis of ``A_c`` are the first build's — 0.1 s at 10k and 0.5 s at
-    40k guest vertices (with band rows kept apart, below, the augmented
-    system is analysed anew: 2 s at 100k, 8 s at 300k). Rebuilds in the
+    values only — the patterns of the factors and of ``A_c`` are the first
+    build's — and factors ``A_c`` anew: about 0.5 s at 40k guest vertices
+    with the band rows kept apart (below; 2 s at 100k, 8 s at 300k). Rebuilds in the
     first iterations, while the guest still moves far, led the paper's
     longer patch (compressed into its hole) to another stationary point 1 %
     higher in energy;
@@ -378,6 +381,12 @@ class TwoLevelModel:
         self.free_dofs = dofs(solver.free)
         self.labels = None
         self._cache = {}
+        # set at the first build: the free vertices' clusters by vertex (-1 fixed), which
+        # terms are kept apart, per factor whether it is a wide term's, the patterns found
+        self._vertex_labels = None
+        self._wide = None
+        self._factor_wide = None
+        self._pattern = None
         self.built_rotations = None
         self.factorizations = 0
         self.seconds = {"clusters": 0.0, "model": 0.0, "coarse": 0.0, "factor": 0.0}
@@ -509,7 +518,7 @@ class TwoLevelModel:
             f"the two-level preconditioner's model would hold {self.model_entries:,} entries "
             f"(its coarse system {self.coarse_entries:,}), more than "
             f"igljoin.twolevel.MAX_MODEL_ENTRIES = {MAX_MODEL_ENTRIES:,} (about "
-            f"{38 * self.model_entries / 1e9:.0f} GB at its first build): use "
+            f"{_BYTES_PER_ENTRY * self.model_entries / 1e9:.0f} GB at its first build): use "
             "preconditioner='factored' (or 'auto', which then keeps the factored form), "
             f"{pardiso}or raise igljoin.twolevel.MAX_MODEL_ENTRIES"
         )
@@ -560,7 +569,7 @@ class TwoLevelModel:
         weights : ndarray, shape (rows,), or None
         """
         mats = [sp.csr_matrix(J) for J, _, _ in self.factors]
-        pattern = getattr(self, "_pattern", None)
+        pattern = self._pattern
         same = pattern is not None and len(pattern[0]) == len(mats)
         # the cached factors share their index arrays from build to build: no copies kept
         same = same and all(

@@ -226,7 +226,7 @@ def _newton(solver, res) -> dict:
 _PRECONDITIONERS = ("factored", "two-level", "auto")
 
 
-def _preconditioners(solver, res) -> dict:
+def _preconditioners(solver) -> dict:
     """The join with each ``preconditioner`` option, from the same start and settings.
 
     Every run is ``solver.solve(preconditioner=...)``; *seconds* is its
@@ -319,7 +319,7 @@ def run_case(spec: dict) -> dict:
     if spec.get("newton"):
         out["newton"] = _newton(solver, res)
     if spec.get("twolevel"):
-        out["twolevel"] = _preconditioners(solver, res)
+        out["twolevel"] = _preconditioners(solver)
     if spec["kind"] == "host":
         # the same join with the whole host checked and selected (the path of a small
         # host, and of every host before the neighbourhood checks), back to back
@@ -865,7 +865,10 @@ def _twolevel_table(cases: list[dict]) -> list[str]:
         return str(t["iterations"]) + ("" if t["converged"] else " (cap)")
 
     for c in rows:
-        p, two, auto = (c["twolevel"][k] for k in _PRECONDITIONERS)
+        p, two, auto = (c["twolevel"].get(k) for k in _PRECONDITIONERS)
+        if p is None or two is None or auto is None:  # a record of an older run
+            lines.append(f"| {c['name']} | {c['counts']['points']:,} |" + " — |" * 9)
+            continue
         lines.append(
             f"| {c['name']} | {c['counts']['points']:,} | {its(p)} | {_ms(p['seconds'])} | "
             f"{its(two)} | {_ms(two['seconds'])} | {two['relative_gap']:.1e} | "
@@ -986,11 +989,7 @@ def main(argv=None) -> int:
         kept_cases = [c for c in previous["cases"] if c["spec"]["kind"] not in kinds]
         results["throughput"] = previous.get("throughput")
         # one flat list of the earlier runs' machines (each without its own list), newest first
-        earlier = dict(previous["machine"])
-        results["machine"]["earlier_runs"] = [
-            earlier,
-            *_earlier_runs(earlier.pop("earlier_runs", [])),
-        ]
+        results["machine"]["earlier_runs"] = _earlier_runs(previous["machine"])
     for spec in specs:
         name = _name(spec)
         print(f"{name} ...", end=" ", flush=True)
@@ -1029,11 +1028,17 @@ def _write_tables(out_dir: Path, results: dict) -> str:
     """Write ``benchmarks.md``'s tables for ``results`` (its hand-written head kept)."""
     table = markdown(results)
     md = out_dir / "benchmarks.md"
-    if md.exists() and "<!-- benchmark tables -->" in md.read_text():
-        head = md.read_text().split("<!-- benchmark tables -->")[0]
-        atomic_write_text(md, head + "<!-- benchmark tables -->\n\n" + table)
+    marker = "<!-- benchmark tables -->"
+    if not md.exists():
+        atomic_write_text(md, f"# Benchmarks\n\n{marker}\n\n" + table)
+    elif marker in md.read_text():
+        head = md.read_text().split(marker)[0]
+        atomic_write_text(md, head + f"{marker}\n\n" + table)
     else:
-        atomic_write_text(md, "# Benchmarks\n\n<!-- benchmark tables -->\n\n" + table)
+        sys.exit(
+            f"{md} has no '{marker}' line, so it was not written by this script: it is left "
+            "as it is; give --out another folder, or add the line where the tables go"
+        )
     return table
 
 

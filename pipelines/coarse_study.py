@@ -118,7 +118,7 @@ def table(kind: str, sizes: list) -> None:
 
 
 #: The model ``time`` compares with ``P``: the one ``preconditioner="auto"`` uses.
-TIMED = getattr(twolevel, "AUTO_MODEL", dict(bending=True, rebuild_angle=0.2))
+TIMED = dict(getattr(twolevel, "AUTO_MODEL", dict(bending=True, rebuild_angle=0.2)))
 
 
 def timed(kind: str, sizes: list) -> None:

@@ -189,7 +189,9 @@ def _peak_bytes(call) -> int:
 def test_the_fits_memory_does_not_grow_with_curve_times_band(fit_cases, monkeypatch):
     _, V, F, curve, closed, band, _ = fit_cases[-3]
     k, M = len(curve), int(bandfit.band_fit(V, F, curve, closed, band).weights.nnz / len(curve))
-    # a tenth of the curve per chunk: the work arrays are a tenth of the whole curve's
+    # chunks of a tenth of curve × mean band vertices: since the chunks are padded to the
+    # widest row, they hold at most a tenth of the curve, and their work arrays at most a
+    # tenth of the whole curve's
     monkeypatch.setattr(bandfit, "FIT_CHUNK_ENTRIES", k * M // 10)
     chunked = _peak_bytes(lambda: bandfit.band_fit(V, F, curve, closed, band))
     whole = _peak_bytes(lambda: _whole_curve_fit(V, F, curve, closed, band))

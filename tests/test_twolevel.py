@@ -249,7 +249,8 @@ def test_no_rebuild_before_the_first_rebuild_iteration_nor_past_the_cap(patch):
 def test_the_preferred_model_follows_the_option_and_the_size(patch, monkeypatch):
     ls = patch.solver
     opt = igljoin.JoinOptions
-    assert twolevel.preferred_model(ls, opt()) is None
+    assert twolevel.preferred_model(ls, opt(preconditioner="factored")) is None
+    assert twolevel.preferred_model(ls, opt()) is None  # the default, auto, below its threshold
     rigid = twolevel.preferred_model(ls, opt(preconditioner="two-level"))
     assert not rigid.bending and rigid.rebuild_angle is None
     # the patch at resolution 0.5 is far below the threshold: the factored form
@@ -284,7 +285,7 @@ def test_the_auto_model_keeps_the_longer_patch_at_the_plain_runs_minimum():
 def test_the_auto_option_joins_with_the_preferred_model_from_its_threshold(monkeypatch):
     s = phantoms.paper_sample("partial_patch", "equal", resolution=0.5)
     solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
-    default = solver.solve()
+    default = solver.solve(preconditioner="factored")
     assert solver.last_run.timings["model"] == 0.0
     # below the threshold "auto" is the factored form: the very same iterations
     same = solver.solve(preconditioner="auto")

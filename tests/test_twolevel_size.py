@@ -96,7 +96,8 @@ def test_a_coarse_system_too_large_is_refused_before_it_is_built(patch, monkeypa
 def test_auto_keeps_the_factored_form_when_the_coarse_system_is_too_large(patch, monkeypatch):
     s, _ = patch
     solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
-    default = solver.solve()
+    default = solver.solve(preconditioner="factored")
+    assert solver.last_model is None
     monkeypatch.setattr(twolevel, "AUTO_FROM_VERTICES", 0)
     monkeypatch.setattr(twolevel, "MAX_MODEL_ENTRIES", 100)
     model = twolevel.preferred_model(solver.solver, igljoin.JoinOptions(preconditioner="auto"))
@@ -106,3 +107,6 @@ def test_auto_keeps_the_factored_form_when_the_coarse_system_is_too_large(patch,
     # the fallback is P alone: the very iterations of the factored form
     assert auto.iterations == default.iterations
     assert auto.energy[-1] == default.energy[-1]
+    # and the solver keeps the model, which says why it kept P
+    assert "MAX_MODEL_ENTRIES" in solver.last_model.fallback
+    assert solver.last_run.stats["model_builds"] == 0
