@@ -32,6 +32,21 @@ def _position(out, start, stop, c):
     return lo
 
 
+@nb.njit(cache=True, inline="always")
+def _add_row_motions(JA, r, indptr, indices, data, slot, B):
+    """Add row ``r`` of ``J`` times the motions ``B`` into ``JA`` (q, w): one row per cluster."""
+    w = B.shape[2]
+    for p in range(indptr[r], indptr[r + 1]):
+        s = slot[p]
+        if s < 0:
+            continue
+        v = indices[p] // 3
+        c = indices[p] - 3 * v
+        x = data[p]
+        for k in range(w):
+            JA[s, k] += x * B[v, c, k]
+
+
 @nb.njit(cache=True)
 def row_clusters(indptr, indices, labels, stride=3):
     """The clusters every row of ``J`` touches and where each entry lands among them.
@@ -171,15 +186,7 @@ def project(indptr, indices, data, weights, ptr, clusters, slot, bptr, bcols, B,
         if q == 0 or wr == 0.0:
             continue
         JA[:q, :] = 0.0
-        for p in range(indptr[r], indptr[r + 1]):
-            s = slot[p]
-            if s < 0:
-                continue
-            v = indices[p] // 3
-            c = indices[p] - 3 * v
-            x = data[p]
-            for k in range(w):
-                JA[s, k] += x * B[v, c, k]
+        _add_row_motions(JA, r, indptr, indices, data, slot, B)
         first = ptr[r]
         for i in range(q):
             # the row's clusters ascend: each pair's block lies past the one before
@@ -331,15 +338,7 @@ def motion_rows(indptr, indices, data, ptr, slot, B):
     """
     w = B.shape[2]
     out = np.zeros(w * ptr[-1])
+    rows = out.reshape((ptr[-1], w))
     for r in range(len(ptr) - 1):
-        base = w * ptr[r]
-        for p in range(indptr[r], indptr[r + 1]):
-            s = slot[p]
-            if s < 0:
-                continue
-            v = indices[p] // 3
-            c = indices[p] - 3 * v
-            x = data[p]
-            for k in range(w):
-                out[base + w * s + k] += x * B[v, c, k]
+        _add_row_motions(rows[ptr[r] : ptr[r + 1]], r, indptr, indices, data, slot, B)
     return out

@@ -95,11 +95,7 @@ def test_bending_motions_are_quadratic_normal_displacements_of_each_cluster():
 
 def test_the_coarse_space_is_rebuilt_once_the_guest_has_turned(patch):
     ls = patch.solver
-    X0 = patch.initial_guess()
-    X0[ls.fixed] = patch.corr.targets
-    start, _, _ = ls.local(X0)
-    moved = ls.run(X0, patch.corr.targets, max_iterations=10).X
-    later, _, _ = ls.local(moved, start.rotations)
+    start, later = _moved_states(patch)
     model = twolevel.TwoLevelModel(ls, rebuild_angle=0.2)
     # the first build drops the (empty) quasi-Newton memory; rebuilds keep it
     assert model.refresh(start, 1) and model.turned(start) == 0.0
