@@ -225,42 +225,47 @@ class JoinSolver:
     # -- set-up -----------------------------------------------------------------------------
 
     def _prepare(self) -> None:
+        """Set up the correspondence, terms and factorization for the current options.
+
+        Everything is made first and only then kept, so a set-up that fails
+        (a size guard, a system that cannot be factored) leaves the solver as
+        it was.
+        """
         t0 = time.perf_counter()
         opt, host = self.options, self.host
         # §4.1: the curves mapped onto each other, host points inserted into the guest
-        self.parts, c = seams_.correspond_seams(
+        parts, c = seams_.correspond_seams(
             self.guest.V, self.guest.F, host.V, self.pairs, opt.snap_fraction
         )
-        self.corr = c
         t1 = time.perf_counter()
-        self.E = unique_edges(c.F)
+        E = unique_edges(c.F)
         # the rest guest's measures (see join_result); its band fits serve the terms too
-        self._rest = RestMeasures(c, self.E)
-        self.guest_mean_edge = float(self._rest.edge_lengths.mean())
+        rest = RestMeasures(c, E)
         # §4.2–4.4: shape, stretch and one smooth-join term per seam
         curves = [p.host_curve for p in self.pairs]
-        self.bands = seam_bands(opt, host, c, curves, self.parts)
+        bands = seam_bands(opt, host, c, curves, parts)
         # the band fits the measures will use (kept), made now: a band too large for its
         # fit is refused here, not after a solve
-        for curve, part, band in zip(curves, self.parts, self.bands):
+        for curve, part, band in zip(curves, parts, bands):
             self.host_values.band_fit(curve, band)
-            self._rest.fit(part.seam[part.host_hit], curve.closed, band)
+            rest.fit(part.seam[part.host_hit], curve.closed, band)
         built = build_terms(
             TermInputs(
-                opt, c, self.E, self.guest, host, self.host_values, curves, self.parts,
-                self.bands, self._rest.fit,
+                opt, c, E, self.guest, host, self.host_values, curves, parts, bands, rest.fit,
             )
         )  # fmt: skip
-        self.built, self.terms = built, built.terms
         t2 = time.perf_counter()
         # §4.5: the seam vertices fixed in one factorization
-        self.solver = LocalGlobalSolver(self.terms, len(c.V), c.seam, opt.linear_solver)
+        solver = LocalGlobalSolver(built.terms, len(c.V), c.seam, opt.linear_solver)
+        self.parts, self.corr, self.E, self._rest, self.bands = parts, c, E, rest, bands
+        self.guest_mean_edge = float(rest.edge_lengths.mean())
+        self.built, self.terms, self.solver = built, built.terms, solver
         self.factorizations += 1
         # made on a solve's first use (see _bumped, initial_guess) and kept until the next set-up
         self._bump = None
         self._bulge_basis: Any = _UNSET
         self._forget_path()
-        self.timings.update(correspond=t1 - t0, terms=t2 - t1, factor=self.solver.factor_seconds)
+        self.timings.update(correspond=t1 - t0, terms=t2 - t1, factor=solver.factor_seconds)
 
     # -- solving ----------------------------------------------------------------------------
 
@@ -268,7 +273,9 @@ class JoinSolver:
         """Change options; the factorization is rebuilt only if the quadratic form changes.
 
         ``stiffness`` may name a guest attribute, and ``stiffness_regions``
-        replaces the stiffness map, as in the constructor.
+        replaces the stiffness map, as in the constructor. A change refused
+        by the set-up (e.g. a band too large for its fit) leaves the solver
+        as it was: its options, correspondence and factorization.
         """
         if needs_guest(None, changes, stiffness_regions):
             changes = resolve_stiffness(self.guest, None, changes, stiffness_regions)
@@ -277,7 +284,12 @@ class JoinSolver:
         self.options = new
         structural = any(not _same(getattr(old, name), getattr(new, name)) for name in _STRUCTURAL)
         if structural:
-            self._prepare()
+            try:
+                self._prepare()
+            except BaseException:
+                # the set-up keeps nothing until it is whole: the old options still fit it
+                self.options = old
+                raise
 
     def initial_guess(self, targets: np.ndarray | None = None) -> np.ndarray:
         """Rigidly aligned rest guest, with the seam displacement smoothly extended.
@@ -412,15 +424,30 @@ class JoinSolver:
             Called with a :class:`SolveProgress` after every iteration (for
             a progress display of long solves; it should return quickly).
         **changes
-            Option changes applied first (see :meth:`update`).
+            Option changes applied first (see :meth:`update`). If the solve
+            is then refused (an ``OptionsError``: the targets, or a coarse
+            model too large), the changes that needed no new set-up are
+            taken back with it.
 
         Returns
         -------
         JoinResult
         """
         _check_progress(progress)
+        before, made = self.options, self.factorizations
         if changes:
             self.update(**changes)
+        try:
+            return self._solve(targets, progress, start)
+        except OptionsError:
+            if changes and self.factorizations == made:
+                # refused (e.g. the targets, or a model too large): changes that needed no new
+                # set-up go back with it, so the next solve is the one before them
+                self.options = before
+            raise
+
+    def _solve(self, targets: Any, progress: Any, start: Any) -> JoinResult:
+        """:meth:`solve` once its option changes are applied."""
         c = self.corr
         opt = self.options
         bc = c.targets if targets is None else np.asarray(targets, dtype=np.float64)

@@ -586,3 +586,40 @@ def test_dot_kernel_is_the_dot_product():
         ref = float(np.dot(a.reshape(-1), b.reshape(-1)))
         # partial sums in another order: rounding of a sum of 3n products of size ~1
         assert kernels.dot(a, b) == pytest.approx(ref, rel=1e-12, abs=1e-12 * np.sqrt(3 * n + 1))
+
+
+# -- a refused change leaves the solver as it was --------------------------------------------
+
+
+def test_a_refused_set_up_leaves_the_solver_as_it_was(patch, monkeypatch):
+    from igljoin import bandfit
+
+    solver = _solver(patch)
+    first = solver.solve()
+    corr, factor, made = solver.corr, solver.solver, solver.factorizations
+    # the next set-up's band fits are refused (a stand-in for a band too large for its fit)
+    monkeypatch.setattr(bandfit, "MAX_FIT_ENTRIES", 10)
+    with pytest.raises(igljoin.OptionsError, match="MAX_FIT_ENTRIES"):
+        solver.update(snap_fraction=0.2)
+    monkeypatch.undo()
+    assert solver.options.snap_fraction == first.options.snap_fraction
+    assert solver.corr is corr and solver.solver is factor and solver.factorizations == made
+    again = solver.solve()
+    # the same set-up and options: the same iterations and energy, to the bit
+    assert again.iterations == first.iterations and again.energy[-1] == first.energy[-1]
+
+
+def test_a_refused_solve_takes_back_its_option_changes(patch, monkeypatch):
+    from igljoin import twolevel
+
+    solver = _solver(patch)
+    first = solver.solve()
+    monkeypatch.setattr(twolevel, "MAX_MODEL_ENTRIES", 100)
+    with pytest.raises(igljoin.OptionsError, match="MAX_MODEL_ENTRIES"):
+        solver.solve(preconditioner="two-level")
+    with pytest.raises(igljoin.OptionsError, match="targets must be"):
+        solver.solve(np.zeros((2, 3)), energy_tolerance=1e-3)
+    monkeypatch.undo()
+    assert solver.options == first.options
+    again = solver.solve()
+    assert again.iterations == first.iterations and again.energy[-1] == first.energy[-1]
