@@ -100,15 +100,20 @@ def _row(kind, n, name, res, seconds, e_ref, builds="") -> None:
     )
 
 
+def _reference(kind: str, vertices: float):
+    """The solver of a case, its size and the factored ``P``'s run: ``(solver, n, run, s)``."""
+    solver = join_solver(kind, vertices)
+    # the first run of a process compiles the quasi-Newton kernels: not timed
+    run(solver, max_iterations=2)
+    base, seconds = run(solver)
+    return solver, solver.solver.n, base, seconds
+
+
 def table(kind: str, sizes: list) -> None:
     print("| case | n | model | iterations | rejected | builds | s | gap | reach 1e-2..1e-6 |")
     print("|---|---:|---|---:|---:|---:|---:|---:|---|")
     for v in sizes:
-        solver = join_solver(kind, v)
-        n = solver.solver.n
-        # the first run of a process compiles the quasi-Newton kernels: not timed
-        run(solver, max_iterations=2)
-        base, seconds = run(solver)
+        solver, n, base, seconds = _reference(kind, v)
         e_ref = base.energy[-1]
         _row(kind, n, "P", base, seconds, e_ref)
         for name, kw in VARIANTS.items():
@@ -129,10 +134,7 @@ def timed(kind: str, sizes: list) -> None:
     print("| case | n | model | iterations | rejected | builds | s | set-up s | rebuilds s | gap |")
     print("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|")
     for v in sizes:
-        solver = join_solver(kind, v)
-        n = solver.solver.n
-        run(solver, max_iterations=2)
-        base, seconds = run(solver)
+        solver, n, base, seconds = _reference(kind, v)
         e_ref = base.energy[-1]
         print(
             f"| {kind} | {n} | P | {base.iterations} | {base.stats['rejected']} | | "

@@ -150,6 +150,49 @@ def test_the_chunked_fit_is_the_whole_curve_fit_to_the_bit(fit_cases, rows, monk
         _assert_same_fit(a, b)
 
 
+#: Real cuts from the corpus: four scans of different resolution, each kind of cut (a
+#: ball, a plane along edges, a plane splitting triangles, which leaves slivers on the
+#: seam), small and large pieces.
+REAL = (
+    ("bunny10k_textured.obj", "ball", 1),
+    ("bunny10k_textured.obj", "split", 2),
+    ("bunny.obj", "edges", 1),
+    ("bunny.obj", "split", 1),
+    ("cow.obj", "split", 0),
+    ("cow.obj", "edges", 2),
+    ("airplane.obj", "split", 2),
+    ("bone.ply", "ball", 1),
+)
+
+
+@pytest.fixture(scope="module")
+def real_fit_cases():
+    """Band fits along real cuts: on the host and on the cut piece, three median edges wide."""
+    pytest.importorskip("pymeshlab")  # ships the real meshes
+    from .cuts import CORPUS, corpus_cut, read_sample
+
+    cases = []
+    for name, style, place in REAL:
+        case = [c for c in CORPUS if c.mesh == name and c.style == style][place]
+        cut = corpus_cut(case, read_sample(name))
+        curve = np.asarray(cut.host_curve)
+        edges = np.linalg.norm(cut.host.V[curve] - np.roll(cut.host.V[curve], 1, axis=0), axis=1)
+        band = bandfit.BAND_EDGES * float(np.median(edges))
+        cases.append((cut.host.V, cut.host.F, curve, band))
+        cases.append((cut.piece.V, cut.piece.F, np.asarray(cut.piece_at_host), band))
+    return cases
+
+
+@pytest.mark.parametrize("rows", [None, 1, 7])
+def test_the_chunked_fit_is_the_whole_curve_fit_on_real_cuts(real_fit_cases, rows, monkeypatch):
+    if rows is not None:
+        monkeypatch.setattr(bandfit, "_rows_per_chunk", lambda M: rows)
+    for V, F, curve, band in real_fit_cases:
+        a = bandfit.band_fit(V, F, curve, True, band)
+        b = _whole_curve_fit(V, F, curve, True, band)
+        _assert_same_fit(a, b)
+
+
 def test_the_cases_cover_chunk_boundaries_and_the_unknown_side(fit_cases):
     # rows of 7 leave a last chunk shorter than the others on some curve (a boundary
     # inside the curve, not only at its end), and one curve has no edge of the mesh
