@@ -112,13 +112,14 @@ def edge_vectors(X, E):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True)
-def _newton_rotation(A, R):  # pragma: no cover - compiled
+def _newton_rotation(A, R, steps):  # pragma: no cover - compiled
     """Newton on SO(3) for ``max tr(Rᵀ A)`` from ``R`` (3 × 3, updated in place).
 
-    Returns whether it settled at a maximum (a local maximum of ``tr(Rᵀ A)``
-    on SO(3) is the global one); see igljoin.rotations._newton_step. Works on
-    scalars: small-array operations inside a per-vertex loop cost more than
-    the arithmetic.
+    At most ``steps`` steps. Returns whether it settled at a maximum (a
+    local maximum of ``tr(Rᵀ A)`` on SO(3) is the global one); see
+    igljoin.rotations._newton_step. Works on scalars: small-array
+    operations inside a per-vertex loop cost more than the arithmetic.
+    :func:`_newton_lanes` is the same step on a block of vertices.
     """
     a00, a01, a02 = A[0, 0], A[0, 1], A[0, 2]
     a10, a11, a12 = A[1, 0], A[1, 1], A[1, 2]
@@ -127,7 +128,7 @@ def _newton_rotation(A, R):  # pragma: no cover - compiled
     r10, r11, r12 = R[1, 0], R[1, 1], R[1, 2]
     r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
     settled = False
-    for _ in range(_MAX_STEPS):
+    for _ in range(steps):
         # M = Rᵀ A
         m00 = r00 * a00 + r10 * a10 + r20 * a20
         m01 = r00 * a01 + r10 * a11 + r20 * a21
@@ -210,14 +211,198 @@ def _newton_rotation(A, R):  # pragma: no cover - compiled
     return settled
 
 
+# The rotation fit started from hints works on blocks of _LANES vertices held in one
+# buffer of rows of _LANES entries (rows _ROW_A.. the covariances, _ROW_R.. the
+# rotations, then one flag row each): every loop over a block's lanes runs on one
+# array without branches, which the compiler turns into vector instructions.
+_LANES = 64
+_ROW_A = 0
+_ROW_R = 9
+_ROW_ACTIVE = 18
+_ROW_SETTLED = 19
+_ROWS = 20
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _newton_lanes(buf):  # pragma: no cover - compiled
+    """One step of :func:`_newton_rotation` on every active lane of a block.
+
+    ``buf`` holds ``_ROWS`` rows of ``_LANES`` entries. A lane's rotation
+    changes exactly as :func:`_newton_rotation`'s would (the same operations
+    in the same order); a lane whose step breaks off keeps its rotation and
+    goes inactive, one whose step settles is marked settled and goes
+    inactive. Inactive lanes are computed too and their results dropped
+    (the numpy error model lets their divisions by zero pass).
+    """
+    W = _LANES
+    for v in range(W):
+        a00 = buf[(_ROW_A + 0) * W + v]
+        a01 = buf[(_ROW_A + 1) * W + v]
+        a02 = buf[(_ROW_A + 2) * W + v]
+        a10 = buf[(_ROW_A + 3) * W + v]
+        a11 = buf[(_ROW_A + 4) * W + v]
+        a12 = buf[(_ROW_A + 5) * W + v]
+        a20 = buf[(_ROW_A + 6) * W + v]
+        a21 = buf[(_ROW_A + 7) * W + v]
+        a22 = buf[(_ROW_A + 8) * W + v]
+        r00 = buf[(_ROW_R + 0) * W + v]
+        r01 = buf[(_ROW_R + 1) * W + v]
+        r02 = buf[(_ROW_R + 2) * W + v]
+        r10 = buf[(_ROW_R + 3) * W + v]
+        r11 = buf[(_ROW_R + 4) * W + v]
+        r12 = buf[(_ROW_R + 5) * W + v]
+        r20 = buf[(_ROW_R + 6) * W + v]
+        r21 = buf[(_ROW_R + 7) * W + v]
+        r22 = buf[(_ROW_R + 8) * W + v]
+        m00 = r00 * a00 + r10 * a10 + r20 * a20
+        m01 = r00 * a01 + r10 * a11 + r20 * a21
+        m02 = r00 * a02 + r10 * a12 + r20 * a22
+        m10 = r01 * a00 + r11 * a10 + r21 * a20
+        m11 = r01 * a01 + r11 * a11 + r21 * a21
+        m12 = r01 * a02 + r11 * a12 + r21 * a22
+        m20 = r02 * a00 + r12 * a10 + r22 * a20
+        m21 = r02 * a01 + r12 * a11 + r22 * a21
+        m22 = r02 * a02 + r12 * a12 + r22 * a22
+        s0 = m12 - m21
+        s1 = m20 - m02
+        s2 = m01 - m10
+        tr = m00 + m11 + m22
+        a = tr - m00
+        d = tr - m11
+        f = tr - m22
+        b = -0.5 * (m01 + m10)
+        c = -0.5 * (m02 + m20)
+        e = -0.5 * (m12 + m21)
+        c00 = d * f - e * e
+        c01 = c * e - b * f
+        c02 = b * e - c * d
+        c11 = a * f - c * c
+        c12 = b * c - a * e
+        c22 = a * d - b * b
+        det = a * c00 + b * c01 + c * c02
+        scale = abs(a) + abs(d) + abs(f) + 1e-300
+        positive = (
+            (a > _DEGENERATE * scale)
+            & (c22 > _DEGENERATE * scale * scale)
+            & (det > _DEGENERATE * scale * scale * scale)
+        )
+        inv = -1.0 / det
+        w0 = (c00 * s0 + c01 * s1 + c02 * s2) * inv
+        w1 = (c01 * s0 + c11 * s1 + c12 * s2) * inv
+        w2 = (c02 * s0 + c12 * s1 + c22 * s2) * inv
+        theta = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        w0 *= 0.5
+        w1 *= 0.5
+        w2 *= 0.5
+        alpha = 2.0 / (1.0 + w0 * w0 + w1 * w1 + w2 * w2)
+        e00 = 1.0 - alpha * (w1 * w1 + w2 * w2)
+        e11 = 1.0 - alpha * (w0 * w0 + w2 * w2)
+        e22 = 1.0 - alpha * (w0 * w0 + w1 * w1)
+        p01 = alpha * w0 * w1
+        p02 = alpha * w0 * w2
+        p12 = alpha * w1 * w2
+        e01 = p01 - alpha * w2
+        e10 = p01 + alpha * w2
+        e02 = p02 + alpha * w1
+        e20 = p02 - alpha * w1
+        e12 = p12 - alpha * w0
+        e21 = p12 + alpha * w0
+        # a lane steps if it is active, H is positive definite and the step finite
+        go = (buf[_ROW_ACTIVE * W + v] != 0.0) & positive & (theta < math.inf)
+        done = go & (theta <= _STEP_TOLERANCE)
+        n0 = r00 * e00 + r01 * e10 + r02 * e20
+        n1 = r00 * e01 + r01 * e11 + r02 * e21
+        n2 = r00 * e02 + r01 * e12 + r02 * e22
+        buf[(_ROW_R + 0) * W + v] = n0 if go else r00
+        buf[(_ROW_R + 1) * W + v] = n1 if go else r01
+        buf[(_ROW_R + 2) * W + v] = n2 if go else r02
+        n0 = r10 * e00 + r11 * e10 + r12 * e20
+        n1 = r10 * e01 + r11 * e11 + r12 * e21
+        n2 = r10 * e02 + r11 * e12 + r12 * e22
+        buf[(_ROW_R + 3) * W + v] = n0 if go else r10
+        buf[(_ROW_R + 4) * W + v] = n1 if go else r11
+        buf[(_ROW_R + 5) * W + v] = n2 if go else r12
+        n0 = r20 * e00 + r21 * e10 + r22 * e20
+        n1 = r20 * e01 + r21 * e11 + r22 * e21
+        n2 = r20 * e02 + r21 * e12 + r22 * e22
+        buf[(_ROW_R + 6) * W + v] = n0 if go else r20
+        buf[(_ROW_R + 7) * W + v] = n1 if go else r21
+        buf[(_ROW_R + 8) * W + v] = n2 if go else r22
+        buf[_ROW_SETTLED * W + v] = 1.0 if done else buf[_ROW_SETTLED * W + v]
+        buf[_ROW_ACTIVE * W + v] = 1.0 if (go & ~done) else 0.0
+
+
+@nb.njit(cache=True)
+def _fit_rotations(A, hint, R, failed):  # pragma: no cover - compiled
+    """Rotations maximising ``tr(R_vᵀ A_v)``, each by Newton from ``hint[v]``.
+
+    ``A``, ``hint``, ``R`` have shape (n, 3, 3); ``failed`` (n,) is set where
+    Newton did not settle at a maximum (``R`` is then the last iterate).
+    Each vertex ends exactly as :func:`_newton_rotation` from its hint would:
+    blocks of vertices step together (:func:`_newton_lanes`) while more than
+    a quarter of a block still moves; the few left finish one by one.
+    Returns whether any failed.
+    """
+    n = A.shape[0]
+    W = _LANES
+    buf = np.empty(_ROWS * W)
+    Av = np.empty((3, 3))
+    Rv = np.empty((3, 3))
+    any_failed = False
+    for start in range(0, n, W):
+        m = min(W, n - start)
+        for v in range(W):
+            if v < m:
+                for b in range(3):
+                    for a in range(3):
+                        buf[(_ROW_A + 3 * b + a) * W + v] = A[start + v, b, a]
+                        buf[(_ROW_R + 3 * b + a) * W + v] = hint[start + v, b, a]
+                buf[_ROW_ACTIVE * W + v] = 1.0
+            else:
+                # padding lanes: inactive, with finite values
+                for k in range(9):
+                    buf[(_ROW_A + k) * W + v] = 1.0 if k % 4 == 0 else 0.0
+                    buf[(_ROW_R + k) * W + v] = 1.0 if k % 4 == 0 else 0.0
+                buf[_ROW_ACTIVE * W + v] = 0.0
+            buf[_ROW_SETTLED * W + v] = 0.0
+        steps = 0
+        active = m
+        while steps < _MAX_STEPS and 4 * active > W:
+            _newton_lanes(buf)
+            steps += 1
+            active = 0
+            for v in range(W):
+                if buf[_ROW_ACTIVE * W + v] != 0.0:
+                    active += 1
+        for v in range(m):
+            settled = buf[_ROW_SETTLED * W + v] != 0.0
+            if buf[_ROW_ACTIVE * W + v] != 0.0 and steps < _MAX_STEPS:
+                for b in range(3):
+                    for a in range(3):
+                        Av[b, a] = buf[(_ROW_A + 3 * b + a) * W + v]
+                        Rv[b, a] = buf[(_ROW_R + 3 * b + a) * W + v]
+                settled = _newton_rotation(Av, Rv, _MAX_STEPS - steps)
+                for b in range(3):
+                    for a in range(3):
+                        buf[(_ROW_R + 3 * b + a) * W + v] = Rv[b, a]
+            for b in range(3):
+                for a in range(3):
+                    R[start + v, b, a] = buf[(_ROW_R + 3 * b + a) * W + v]
+            if not settled:
+                failed[start + v] = True
+                any_failed = True
+    return any_failed
+
+
 @nb.njit(cache=True)
 def shape_local(
     X, E, Lp, Li, Lx, delta, rest_edges, inc_ptr, inc_edges, mu, w, hint, LX, A, R, G
 ):  # pragma: no cover - compiled
     """The rotation-aware Laplacian term in one call: rotations, energy, half-gradient.
 
-    A pass over the vertices computes ``l(p′)_v``, the covariance and the
-    rotation (Newton on SO(3) from the hint); if every rotation settled,
+    A pass over the vertices computes ``l(p′)_v`` and the covariances, a
+    second the rotations (Newton on SO(3) from the hints, a block of
+    vertices at a time: :func:`_fit_rotations`); if every rotation settled,
     :func:`shape_residuals` follows in the same call.
 
     Parameters
@@ -258,12 +443,23 @@ def shape_local(
         caller (libigl's SVD fit).
     """
     n = X.shape[0]
-    use_hint = hint.shape[0] == n
     failed = np.zeros(n, dtype=np.bool_)
-    any_failed = False
-    Rv = np.zeros((3, 3))
-    for b in range(3):
-        Rv[b, b] = 1.0
+    _covariances(X, E, Lp, Li, Lx, delta, rest_edges, inc_ptr, inc_edges, mu, LX, A)
+    if hint.shape[0] == n:
+        any_failed = _fit_rotations(A, hint, R, failed)
+    else:
+        any_failed = _chain_rotations(A, R, failed)
+    if any_failed:
+        return 0.0, failed
+    return shape_residuals(X, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G), failed
+
+
+@nb.njit(cache=True)
+def _covariances(
+    X, E, Lp, Li, Lx, delta, rest_edges, inc_ptr, inc_edges, mu, LX, A
+):  # pragma: no cover - compiled
+    """``L X`` into ``LX`` (n, 3), the covariances into ``A`` (n, 3, 3); see :func:`shape_local`."""
+    n = X.shape[0]
     for v in range(n):
         s0, s1, s2 = _row_times(Lp, Li, Lx, X, v)
         LX[v, 0] = s0
@@ -299,11 +495,21 @@ def shape_local(
         Av[0, 0], Av[0, 1], Av[0, 2] = c00, c01, c02
         Av[1, 0], Av[1, 1], Av[1, 2] = c10, c11, c12
         Av[2, 0], Av[2, 1], Av[2, 2] = c20, c21, c22
-        if use_hint:
-            for b in range(3):
-                for a in range(3):
-                    Rv[b, a] = hint[v, b, a]
-        if _newton_rotation(Av, Rv):
+
+
+@nb.njit(cache=True)
+def _chain_rotations(A, R, failed):  # pragma: no cover - compiled
+    """:func:`_fit_rotations` without hints: each vertex starts from the previous one's rotation.
+
+    The first starts from the identity, and so does the one after a vertex
+    that failed. Returns whether any failed.
+    """
+    Rv = np.zeros((3, 3))
+    for b in range(3):
+        Rv[b, b] = 1.0
+    any_failed = False
+    for v in range(A.shape[0]):
+        if _newton_rotation(A[v], Rv, _MAX_STEPS):
             for b in range(3):
                 for a in range(3):
                     R[v, b, a] = Rv[b, a]
@@ -313,9 +519,7 @@ def shape_local(
             for b in range(3):
                 for a in range(3):
                     Rv[b, a] = 1.0 if a == b else 0.0
-    if any_failed:
-        return 0.0, failed
-    return shape_residuals(X, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G), failed
+    return any_failed
 
 
 @nb.njit(cache=True)
