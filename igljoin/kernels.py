@@ -31,7 +31,6 @@ __all__ = [
     "stretch_local",
     "smooth_local",
     "band_local",
-    "incidence",
     "dot",
     "place_rows",
     "take_rows",
@@ -45,27 +44,6 @@ __all__ = [
 _STEP_TOLERANCE = 1e-7
 _MAX_STEPS = 8
 _DEGENERATE = 1e-9
-
-
-def incidence(E: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Edges incident to each vertex in CSR form.
-
-    Parameters
-    ----------
-    E : ndarray of int64, shape (e, 2)
-    n : int
-
-    Returns
-    -------
-    ptr : ndarray of int64, shape (n + 1,)
-    edges : ndarray of int64, shape (2 e,)
-        ``edges[ptr[v]:ptr[v + 1]]`` are the edges with ``v`` as an endpoint.
-    """
-    ends = E.reshape(-1)
-    order = np.argsort(ends, kind="stable")
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(ends, minlength=n), out=ptr[1:])
-    return ptr, (order // 2).astype(np.int64)
 
 
 @nb.njit(cache=True, inline="always")
@@ -396,7 +374,7 @@ def _fit_rotations(A, hint, R, failed):  # pragma: no cover - compiled
 
 @nb.njit(cache=True)
 def shape_local(
-    X, E, Lp, Li, Lx, delta, rest_edges, inc_ptr, inc_edges, mu, w, hint, LX, A, R, G
+    X, E, Lp, Li, Lx, delta, rest_edges, mu, w, hint, LX, A, R, d, G
 ):  # pragma: no cover - compiled
     """The rotation-aware Laplacian term in one call: rotations, energy, half-gradient.
 
@@ -415,8 +393,6 @@ def shape_local(
     delta : ndarray, shape (n, 3)
         Rest Laplacian coordinates ``L V0``.
     rest_edges : ndarray, shape (e, 3)
-    inc_ptr, inc_edges : ndarray of int64
-        Edges incident to each vertex (:func:`incidence`).
     mu : float
         Weight of the one-ring edges.
     w : float
@@ -430,6 +406,8 @@ def shape_local(
         Output: covariances ``A_v = l(p′)_v δ_vᵀ + μ Σ_e d_e e0_eᵀ``.
     R : ndarray, shape (n, 3, 3)
         Output: rotations maximising ``tr(R_vᵀ A_v)`` where Newton settled.
+    d : ndarray, shape (e, 3)
+        Output: the edge vectors ``d_e`` (the stretch term's too).
     G : ndarray, shape (n, 3)
         Half-gradient, added to when every rotation settled.
 
@@ -444,57 +422,55 @@ def shape_local(
     """
     n = X.shape[0]
     failed = np.zeros(n, dtype=np.bool_)
-    _covariances(X, E, Lp, Li, Lx, delta, rest_edges, inc_ptr, inc_edges, mu, LX, A)
+    _covariances(X, E, Lp, Li, Lx, delta, rest_edges, mu, LX, A, d)
     if hint.shape[0] == n:
         any_failed = _fit_rotations(A, hint, R, failed)
     else:
         any_failed = _chain_rotations(A, R, failed)
     if any_failed:
         return 0.0, failed
-    return shape_residuals(X, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G), failed
+    return shape_residuals(d, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G), failed
 
 
 @nb.njit(cache=True)
-def _covariances(
-    X, E, Lp, Li, Lx, delta, rest_edges, inc_ptr, inc_edges, mu, LX, A
-):  # pragma: no cover - compiled
-    """``L X`` into ``LX`` (n, 3), the covariances into ``A`` (n, 3, 3); see :func:`shape_local`."""
-    n = X.shape[0]
-    for v in range(n):
+def _covariances(X, E, Lp, Li, Lx, delta, rest_edges, mu, LX, A, d):  # pragma: no cover
+    """``L X`` into ``LX`` (n, 3), the covariances into ``A`` (n, 3, 3), ``d_e`` into ``d`` (e, 3).
+
+    ``A_v`` starts as ``l(p′)_v δ_vᵀ``; a pass over the edges then adds
+    ``μ d_e e0_eᵀ`` to both ends, so each ``A_v`` sums its edges in the
+    order of their indices. See :func:`shape_local`.
+    """
+    for v in range(X.shape[0]):
         s0, s1, s2 = _row_times(Lp, Li, Lx, X, v)
         LX[v, 0] = s0
         LX[v, 1] = s1
         LX[v, 2] = s2
-        # the covariance in scalars (kept in registers; the sums in the same order)
         x0 = delta[v, 0]
         x1 = delta[v, 1]
         x2 = delta[v, 2]
-        c00, c01, c02 = s0 * x0, s0 * x1, s0 * x2
-        c10, c11, c12 = s1 * x0, s1 * x1, s1 * x2
-        c20, c21, c22 = s2 * x0, s2 * x1, s2 * x2
-        for k in range(inc_ptr[v], inc_ptr[v + 1]):
-            e = inc_edges[k]
-            i = E[e, 0]
-            j = E[e, 1]
-            e0 = rest_edges[e, 0]
-            e1 = rest_edges[e, 1]
-            e2 = rest_edges[e, 2]
-            db = mu * (X[i, 0] - X[j, 0])
-            c00 += db * e0
-            c01 += db * e1
-            c02 += db * e2
-            db = mu * (X[i, 1] - X[j, 1])
-            c10 += db * e0
-            c11 += db * e1
-            c12 += db * e2
-            db = mu * (X[i, 2] - X[j, 2])
-            c20 += db * e0
-            c21 += db * e1
-            c22 += db * e2
         Av = A[v]
-        Av[0, 0], Av[0, 1], Av[0, 2] = c00, c01, c02
-        Av[1, 0], Av[1, 1], Av[1, 2] = c10, c11, c12
-        Av[2, 0], Av[2, 1], Av[2, 2] = c20, c21, c22
+        Av[0, 0], Av[0, 1], Av[0, 2] = s0 * x0, s0 * x1, s0 * x2
+        Av[1, 0], Av[1, 1], Av[1, 2] = s1 * x0, s1 * x1, s1 * x2
+        Av[2, 0], Av[2, 1], Av[2, 2] = s2 * x0, s2 * x1, s2 * x2
+    for e in range(E.shape[0]):
+        i = E[e, 0]
+        j = E[e, 1]
+        e0 = rest_edges[e, 0]
+        e1 = rest_edges[e, 1]
+        e2 = rest_edges[e, 2]
+        for b in range(3):
+            dc = X[i, b] - X[j, b]
+            d[e, b] = dc
+            db = mu * dc
+            p0 = db * e0
+            p1 = db * e1
+            p2 = db * e2
+            A[i, b, 0] += p0
+            A[i, b, 1] += p1
+            A[i, b, 2] += p2
+            A[j, b, 0] += p0
+            A[j, b, 1] += p1
+            A[j, b, 2] += p2
 
 
 @nb.njit(cache=True)
@@ -523,13 +499,13 @@ def _chain_rotations(A, R, failed):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True)
-def shape_residuals(X, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G):  # pragma: no cover
+def shape_residuals(d, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G):  # pragma: no cover
     """Second half of the rotation-aware Laplacian term: energy and half-gradient.
 
     With the rotations ``R`` (n, 3, 3) fitted, returns the energy
     ``w (Σ ‖l(p′)_v − R_v δ_v‖² + μ Σ_e (‖d_e − R_i e0‖² + ‖d_e − R_j e0‖²))``
-    and adds ``w (Lᵀ r + μ Dᵀ (r0 + r1))`` to ``G`` (n, 3). Arguments as in
-    :func:`shape_local`.
+    and adds ``w (Lᵀ r + μ Dᵀ (r0 + r1))`` to ``G`` (n, 3). ``d`` (e, 3) are
+    the edge vectors; the other arguments as in :func:`shape_local`.
     """
     n = LX.shape[0]
     energy_lap = 0.0
@@ -559,7 +535,7 @@ def shape_residuals(X, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G):  # pr
         s1 = 0.0
         s2 = 0.0
         for c in range(3):
-            dc = X[i, c] - X[j, c]
+            dc = d[e, c]
             ri = dc - (R[i, c, 0] * x0 + R[i, c, 1] * x1 + R[i, c, 2] * x2)
             rj = dc - (R[j, c, 0] * x0 + R[j, c, 1] * x1 + R[j, c, 2] * x2)
             energy_edges += ri * ri + rj * rj
@@ -574,10 +550,11 @@ def shape_residuals(X, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G):  # pr
 
 
 @nb.njit(cache=True)
-def stretch_local(X, E, k, rest_length, rest, R, G):  # pragma: no cover - compiled
+def stretch_local(d, E, k, rest_length, rest, R, G):  # pragma: no cover - compiled
     """Edge-length term ``Σ k (|d| − L0)²``: return the energy, add the half-gradient.
 
-    ``d_e = X[E[e, 0]] − X[E[e, 1]]``. A collapsed edge (``|d| ≤ 1e-12 L0``)
+    ``d`` (e, 3) are the edge vectors ``d_e = X[E[e, 0]] − X[E[e, 1]]``
+    (:func:`edge_vectors`). A collapsed edge (``|d| ≤ 1e-12 L0``)
     is pulled to its rest vector, rotated by its first endpoint's rotation
     when ``R`` (n, 3, 3) is given (an empty ``R`` leaves it unrotated).
     """
@@ -586,9 +563,9 @@ def stretch_local(X, E, k, rest_length, rest, R, G):  # pragma: no cover - compi
     for e in range(E.shape[0]):
         i = E[e, 0]
         j = E[e, 1]
-        d0 = X[i, 0] - X[j, 0]
-        d1 = X[i, 1] - X[j, 1]
-        d2 = X[i, 2] - X[j, 2]
+        d0 = d[e, 0]
+        d1 = d[e, 1]
+        d2 = d[e, 2]
         length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         if length > 1e-12 * max(rest_length[e], 1e-300):
             gap = length - rest_length[e]

@@ -170,13 +170,6 @@ def test_terms_are_compiled_by_default_and_on_request(tube):
     assert not shape.compiled and not stretch.compiled
 
 
-def test_incidence_lists_each_edge_at_both_ends():
-    E = np.array([[0, 1], [1, 2], [2, 0], [2, 3]])
-    ptr, edges = kernels.incidence(E, 5)
-    at = [sorted(edges[ptr[v] : ptr[v + 1]].tolist()) for v in range(5)]
-    assert at == [[0, 2], [0, 1], [1, 2, 3], [3], []]
-
-
 def _rotation_fit_cases(seed):
     """Covariances and hints of every kind the rotation fit meets, shape (n, 3, 3) each.
 
