@@ -89,15 +89,98 @@ def edge_vectors(X, E):  # pragma: no cover - compiled
     return d
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _newton_step(
+    a00, a01, a02, a10, a11, a12, a20, a21, a22, r00, r01, r02, r10, r11, r12, r20, r21, r22
+):  # pragma: no cover - compiled
+    """One Newton step on SO(3) for ``max tr(Rᵀ A)`` from ``R``, in scalars.
+
+    See igljoin.rotations._newton_step. Returns ``ok`` (the Hessian is
+    positive definite, relative margin ``_DEGENERATE``, and the step
+    finite), the step's size ``θ`` and the nine entries of the new ``R``
+    (row by row); the new ``R`` is meaningful only where ``ok``. Without
+    branches, so that a loop over a block of vertices stays vectorised
+    (:func:`_newton_lanes`); its callers use the numpy error model, as a
+    step whose ``ok`` is false may divide by zero.
+    """
+    # M = Rᵀ A
+    m00 = r00 * a00 + r10 * a10 + r20 * a20
+    m01 = r00 * a01 + r10 * a11 + r20 * a21
+    m02 = r00 * a02 + r10 * a12 + r20 * a22
+    m10 = r01 * a00 + r11 * a10 + r21 * a20
+    m11 = r01 * a01 + r11 * a11 + r21 * a21
+    m12 = r01 * a02 + r11 * a12 + r21 * a22
+    m20 = r02 * a00 + r12 * a10 + r22 * a20
+    m21 = r02 * a01 + r12 * a11 + r22 * a21
+    m22 = r02 * a02 + r12 * a12 + r22 * a22
+    s0 = m12 - m21
+    s1 = m20 - m02
+    s2 = m01 - m10
+    tr = m00 + m11 + m22
+    a = tr - m00
+    d = tr - m11
+    f = tr - m22
+    b = -0.5 * (m01 + m10)
+    c = -0.5 * (m02 + m20)
+    e = -0.5 * (m12 + m21)
+    c00 = d * f - e * e
+    c01 = c * e - b * f
+    c02 = b * e - c * d
+    c11 = a * f - c * c
+    c12 = b * c - a * e
+    c22 = a * d - b * b
+    det = a * c00 + b * c01 + c * c02
+    scale = abs(a) + abs(d) + abs(f) + 1e-300
+    positive = (
+        (a > _DEGENERATE * scale)
+        & (c22 > _DEGENERATE * scale * scale)
+        & (det > _DEGENERATE * scale * scale * scale)
+    )
+    inv = -1.0 / det
+    w0 = (c00 * s0 + c01 * s1 + c02 * s2) * inv
+    w1 = (c01 * s0 + c11 * s1 + c12 * s2) * inv
+    w2 = (c02 * s0 + c12 * s1 + c22 * s2) * inv
+    theta = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    # Cayley retraction of the half step (exactly orthogonal)
+    w0 *= 0.5
+    w1 *= 0.5
+    w2 *= 0.5
+    alpha = 2.0 / (1.0 + w0 * w0 + w1 * w1 + w2 * w2)
+    e00 = 1.0 - alpha * (w1 * w1 + w2 * w2)
+    e11 = 1.0 - alpha * (w0 * w0 + w2 * w2)
+    e22 = 1.0 - alpha * (w0 * w0 + w1 * w1)
+    p01 = alpha * w0 * w1
+    p02 = alpha * w0 * w2
+    p12 = alpha * w1 * w2
+    e01 = p01 - alpha * w2
+    e10 = p01 + alpha * w2
+    e02 = p02 + alpha * w1
+    e20 = p02 - alpha * w1
+    e12 = p12 - alpha * w0
+    e21 = p12 + alpha * w0
+    return (
+        positive & (theta < math.inf),
+        theta,
+        r00 * e00 + r01 * e10 + r02 * e20,
+        r00 * e01 + r01 * e11 + r02 * e21,
+        r00 * e02 + r01 * e12 + r02 * e22,
+        r10 * e00 + r11 * e10 + r12 * e20,
+        r10 * e01 + r11 * e11 + r12 * e21,
+        r10 * e02 + r11 * e12 + r12 * e22,
+        r20 * e00 + r21 * e10 + r22 * e20,
+        r20 * e01 + r21 * e11 + r22 * e21,
+        r20 * e02 + r21 * e12 + r22 * e22,
+    )
+
+
+@nb.njit(cache=True, error_model="numpy")
 def _newton_rotation(A, R, steps):  # pragma: no cover - compiled
     """Newton on SO(3) for ``max tr(Rᵀ A)`` from ``R`` (3 × 3, updated in place).
 
-    At most ``steps`` steps. Returns whether it settled at a maximum (a
-    local maximum of ``tr(Rᵀ A)`` on SO(3) is the global one); see
-    igljoin.rotations._newton_step. Works on scalars: small-array
-    operations inside a per-vertex loop cost more than the arithmetic.
-    :func:`_newton_lanes` is the same step on a block of vertices.
+    At most ``steps`` steps (:func:`_newton_step`). Returns whether it
+    settled at a maximum (a local maximum of ``tr(Rᵀ A)`` on SO(3) is the
+    global one). Works on scalars: small-array operations inside a
+    per-vertex loop cost more than the arithmetic.
     """
     a00, a01, a02 = A[0, 0], A[0, 1], A[0, 2]
     a10, a11, a12 = A[1, 0], A[1, 1], A[1, 2]
@@ -107,79 +190,15 @@ def _newton_rotation(A, R, steps):  # pragma: no cover - compiled
     r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
     settled = False
     for _ in range(steps):
-        # M = Rᵀ A
-        m00 = r00 * a00 + r10 * a10 + r20 * a20
-        m01 = r00 * a01 + r10 * a11 + r20 * a21
-        m02 = r00 * a02 + r10 * a12 + r20 * a22
-        m10 = r01 * a00 + r11 * a10 + r21 * a20
-        m11 = r01 * a01 + r11 * a11 + r21 * a21
-        m12 = r01 * a02 + r11 * a12 + r21 * a22
-        m20 = r02 * a00 + r12 * a10 + r22 * a20
-        m21 = r02 * a01 + r12 * a11 + r22 * a21
-        m22 = r02 * a02 + r12 * a12 + r22 * a22
-        s0 = m12 - m21
-        s1 = m20 - m02
-        s2 = m01 - m10
-        tr = m00 + m11 + m22
-        a = tr - m00
-        d = tr - m11
-        f = tr - m22
-        b = -0.5 * (m01 + m10)
-        c = -0.5 * (m02 + m20)
-        e = -0.5 * (m12 + m21)
-        c00 = d * f - e * e
-        c01 = c * e - b * f
-        c02 = b * e - c * d
-        c11 = a * f - c * c
-        c12 = b * c - a * e
-        c22 = a * d - b * b
-        det = a * c00 + b * c01 + c * c02
-        scale = abs(a) + abs(d) + abs(f) + 1e-300
-        if not (
-            a > _DEGENERATE * scale
-            and c22 > _DEGENERATE * scale * scale
-            and det > _DEGENERATE * scale * scale * scale
-        ):
+        ok, theta, n00, n01, n02, n10, n11, n12, n20, n21, n22 = _newton_step(
+            a00, a01, a02, a10, a11, a12, a20, a21, a22,
+            r00, r01, r02, r10, r11, r12, r20, r21, r22,
+        )  # fmt: skip
+        if not ok:
             break
-        inv = -1.0 / det
-        w0 = (c00 * s0 + c01 * s1 + c02 * s2) * inv
-        w1 = (c01 * s0 + c11 * s1 + c12 * s2) * inv
-        w2 = (c02 * s0 + c12 * s1 + c22 * s2) * inv
-        theta = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-        if not math.isfinite(theta):
-            break
-        # Cayley retraction of the half step (exactly orthogonal)
-        w0 *= 0.5
-        w1 *= 0.5
-        w2 *= 0.5
-        alpha = 2.0 / (1.0 + w0 * w0 + w1 * w1 + w2 * w2)
-        e00 = 1.0 - alpha * (w1 * w1 + w2 * w2)
-        e11 = 1.0 - alpha * (w0 * w0 + w2 * w2)
-        e22 = 1.0 - alpha * (w0 * w0 + w1 * w1)
-        p01 = alpha * w0 * w1
-        p02 = alpha * w0 * w2
-        p12 = alpha * w1 * w2
-        e01 = p01 - alpha * w2
-        e10 = p01 + alpha * w2
-        e02 = p02 + alpha * w1
-        e20 = p02 - alpha * w1
-        e12 = p12 - alpha * w0
-        e21 = p12 + alpha * w0
-        r00, r01, r02 = (
-            r00 * e00 + r01 * e10 + r02 * e20,
-            r00 * e01 + r01 * e11 + r02 * e21,
-            r00 * e02 + r01 * e12 + r02 * e22,
-        )
-        r10, r11, r12 = (
-            r10 * e00 + r11 * e10 + r12 * e20,
-            r10 * e01 + r11 * e11 + r12 * e21,
-            r10 * e02 + r11 * e12 + r12 * e22,
-        )
-        r20, r21, r22 = (
-            r20 * e00 + r21 * e10 + r22 * e20,
-            r20 * e01 + r21 * e11 + r22 * e21,
-            r20 * e02 + r21 * e12 + r22 * e22,
-        )
+        r00, r01, r02 = n00, n01, n02
+        r10, r11, r12 = n10, n11, n12
+        r20, r21, r22 = n20, n21, n22
         if theta <= _STEP_TOLERANCE:
             settled = True
             break
@@ -206,23 +225,13 @@ def _newton_lanes(buf):  # pragma: no cover - compiled
     """One step of :func:`_newton_rotation` on every active lane of a block.
 
     ``buf`` holds ``_ROWS`` rows of ``_LANES`` entries. A lane's rotation
-    changes exactly as :func:`_newton_rotation`'s would (the same operations
-    in the same order); a lane whose step breaks off keeps its rotation and
-    goes inactive, one whose step settles is marked settled and goes
-    inactive. Inactive lanes are computed too and their results dropped
-    (the numpy error model lets their divisions by zero pass).
+    changes exactly as :func:`_newton_rotation`'s would (the same
+    :func:`_newton_step`); a lane whose step breaks off keeps its rotation
+    and goes inactive, one whose step settles is marked settled and goes
+    inactive. Inactive lanes are computed too and their results dropped.
     """
     W = _LANES
     for v in range(W):
-        a00 = buf[(_ROW_A + 0) * W + v]
-        a01 = buf[(_ROW_A + 1) * W + v]
-        a02 = buf[(_ROW_A + 2) * W + v]
-        a10 = buf[(_ROW_A + 3) * W + v]
-        a11 = buf[(_ROW_A + 4) * W + v]
-        a12 = buf[(_ROW_A + 5) * W + v]
-        a20 = buf[(_ROW_A + 6) * W + v]
-        a21 = buf[(_ROW_A + 7) * W + v]
-        a22 = buf[(_ROW_A + 8) * W + v]
         r00 = buf[(_ROW_R + 0) * W + v]
         r01 = buf[(_ROW_R + 1) * W + v]
         r02 = buf[(_ROW_R + 2) * W + v]
@@ -232,80 +241,23 @@ def _newton_lanes(buf):  # pragma: no cover - compiled
         r20 = buf[(_ROW_R + 6) * W + v]
         r21 = buf[(_ROW_R + 7) * W + v]
         r22 = buf[(_ROW_R + 8) * W + v]
-        m00 = r00 * a00 + r10 * a10 + r20 * a20
-        m01 = r00 * a01 + r10 * a11 + r20 * a21
-        m02 = r00 * a02 + r10 * a12 + r20 * a22
-        m10 = r01 * a00 + r11 * a10 + r21 * a20
-        m11 = r01 * a01 + r11 * a11 + r21 * a21
-        m12 = r01 * a02 + r11 * a12 + r21 * a22
-        m20 = r02 * a00 + r12 * a10 + r22 * a20
-        m21 = r02 * a01 + r12 * a11 + r22 * a21
-        m22 = r02 * a02 + r12 * a12 + r22 * a22
-        s0 = m12 - m21
-        s1 = m20 - m02
-        s2 = m01 - m10
-        tr = m00 + m11 + m22
-        a = tr - m00
-        d = tr - m11
-        f = tr - m22
-        b = -0.5 * (m01 + m10)
-        c = -0.5 * (m02 + m20)
-        e = -0.5 * (m12 + m21)
-        c00 = d * f - e * e
-        c01 = c * e - b * f
-        c02 = b * e - c * d
-        c11 = a * f - c * c
-        c12 = b * c - a * e
-        c22 = a * d - b * b
-        det = a * c00 + b * c01 + c * c02
-        scale = abs(a) + abs(d) + abs(f) + 1e-300
-        positive = (
-            (a > _DEGENERATE * scale)
-            & (c22 > _DEGENERATE * scale * scale)
-            & (det > _DEGENERATE * scale * scale * scale)
-        )
-        inv = -1.0 / det
-        w0 = (c00 * s0 + c01 * s1 + c02 * s2) * inv
-        w1 = (c01 * s0 + c11 * s1 + c12 * s2) * inv
-        w2 = (c02 * s0 + c12 * s1 + c22 * s2) * inv
-        theta = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-        w0 *= 0.5
-        w1 *= 0.5
-        w2 *= 0.5
-        alpha = 2.0 / (1.0 + w0 * w0 + w1 * w1 + w2 * w2)
-        e00 = 1.0 - alpha * (w1 * w1 + w2 * w2)
-        e11 = 1.0 - alpha * (w0 * w0 + w2 * w2)
-        e22 = 1.0 - alpha * (w0 * w0 + w1 * w1)
-        p01 = alpha * w0 * w1
-        p02 = alpha * w0 * w2
-        p12 = alpha * w1 * w2
-        e01 = p01 - alpha * w2
-        e10 = p01 + alpha * w2
-        e02 = p02 + alpha * w1
-        e20 = p02 - alpha * w1
-        e12 = p12 - alpha * w0
-        e21 = p12 + alpha * w0
-        # a lane steps if it is active, H is positive definite and the step finite
-        go = (buf[_ROW_ACTIVE * W + v] != 0.0) & positive & (theta < math.inf)
+        ok, theta, n00, n01, n02, n10, n11, n12, n20, n21, n22 = _newton_step(
+            buf[(_ROW_A + 0) * W + v], buf[(_ROW_A + 1) * W + v], buf[(_ROW_A + 2) * W + v],
+            buf[(_ROW_A + 3) * W + v], buf[(_ROW_A + 4) * W + v], buf[(_ROW_A + 5) * W + v],
+            buf[(_ROW_A + 6) * W + v], buf[(_ROW_A + 7) * W + v], buf[(_ROW_A + 8) * W + v],
+            r00, r01, r02, r10, r11, r12, r20, r21, r22,
+        )  # fmt: skip
+        go = (buf[_ROW_ACTIVE * W + v] != 0.0) & ok
         done = go & (theta <= _STEP_TOLERANCE)
-        n0 = r00 * e00 + r01 * e10 + r02 * e20
-        n1 = r00 * e01 + r01 * e11 + r02 * e21
-        n2 = r00 * e02 + r01 * e12 + r02 * e22
-        buf[(_ROW_R + 0) * W + v] = n0 if go else r00
-        buf[(_ROW_R + 1) * W + v] = n1 if go else r01
-        buf[(_ROW_R + 2) * W + v] = n2 if go else r02
-        n0 = r10 * e00 + r11 * e10 + r12 * e20
-        n1 = r10 * e01 + r11 * e11 + r12 * e21
-        n2 = r10 * e02 + r11 * e12 + r12 * e22
-        buf[(_ROW_R + 3) * W + v] = n0 if go else r10
-        buf[(_ROW_R + 4) * W + v] = n1 if go else r11
-        buf[(_ROW_R + 5) * W + v] = n2 if go else r12
-        n0 = r20 * e00 + r21 * e10 + r22 * e20
-        n1 = r20 * e01 + r21 * e11 + r22 * e21
-        n2 = r20 * e02 + r21 * e12 + r22 * e22
-        buf[(_ROW_R + 6) * W + v] = n0 if go else r20
-        buf[(_ROW_R + 7) * W + v] = n1 if go else r21
-        buf[(_ROW_R + 8) * W + v] = n2 if go else r22
+        buf[(_ROW_R + 0) * W + v] = n00 if go else r00
+        buf[(_ROW_R + 1) * W + v] = n01 if go else r01
+        buf[(_ROW_R + 2) * W + v] = n02 if go else r02
+        buf[(_ROW_R + 3) * W + v] = n10 if go else r10
+        buf[(_ROW_R + 4) * W + v] = n11 if go else r11
+        buf[(_ROW_R + 5) * W + v] = n12 if go else r12
+        buf[(_ROW_R + 6) * W + v] = n20 if go else r20
+        buf[(_ROW_R + 7) * W + v] = n21 if go else r21
+        buf[(_ROW_R + 8) * W + v] = n22 if go else r22
         buf[_ROW_SETTLED * W + v] = 1.0 if done else buf[_ROW_SETTLED * W + v]
         buf[_ROW_ACTIVE * W + v] = 1.0 if (go & ~done) else 0.0
 

@@ -203,11 +203,16 @@ def check_order(terms: list[Term]) -> None:
             )
 
 
+def _edges_key(E: np.ndarray) -> tuple:
+    """Key of the edge vectors over ``E`` (e, 2) in ``LocalState.cache``."""
+    return ("edges", id(E))
+
+
 def _edge_vectors(
     state: LocalState, E: np.ndarray, D: sp.csr_matrix, compiled: bool = True
 ) -> np.ndarray:
     """``X[E[:, 0]] − X[E[:, 1]]``, shape (e, 3), shared by the terms using the same ``E``."""
-    key = ("edges", id(E))
+    key = _edges_key(E)
     if key not in state.cache:
         state.cache[key] = kernels.edge_vectors(state.X, E) if compiled else D @ state.X
     return state.cache[key]
@@ -522,7 +527,7 @@ class ShapeTerm(Term):
             )  # fmt: skip
         state.rotations = R
         state.cache["LX"] = LX
-        state.cache[("edges", id(self.E))] = d
+        state.cache[_edges_key(self.E)] = d
         return float(e)
 
 
