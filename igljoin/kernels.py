@@ -4,8 +4,11 @@ Every iteration of the join evaluates, for the current positions, each
 term's energy and half-gradient (:meth:`igljoin.terms.Term.local`). In numpy
 that is a few dozen array passes, sparse products and gathers per step —
 about 2 ms on a paper-sized guest, most of the iteration. The functions here
-do the same work as one loop over vertices or edges each, compiled by numba
-(``cache=True``: compiled once per machine, then loaded from the cache).
+do the same work in a few loops over vertices or edges, compiled by numba
+(``cache=True``: compiled once per machine, then loaded from the cache); the
+rotation fit steps a block of vertices at a time through branch-free loops
+that the compiler vectorises, each vertex still through exactly its own
+sequence of operations.
 
 They are exact re-statements of the numpy local steps in
 :mod:`igljoin.terms`, which stay as the reference implementation: a term
