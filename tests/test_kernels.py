@@ -212,3 +212,21 @@ def test_block_rotation_fit_is_the_per_vertex_newton(seed):
     assert settled.any() and not settled.all()
     short = hint.copy()
     assert any(settled[v] and not kernels._newton_rotation(A[v], short[v], 3) for v in range(n))
+
+
+def test_stretch_term_reads_the_edge_vectors_the_shape_term_left(tube):
+    """The shape term's step leaves ``D X`` for the stretch term; both give what they give alone."""
+    solver = _solver(tube)
+    shape, stretch = solver.terms[0], solver.terms[1]
+    X = _perturbed(solver, 0.3, 8)
+    shared = LocalState(X)
+    shape.local_into(shared, np.zeros_like(X))
+    left = [v for k, v in shared.cache.items() if isinstance(k, tuple) and k[0] == "edges"]
+    assert len(left) == 1 and np.array_equal(left[0], kernels.edge_vectors(X, stretch.E))
+    G_shared = np.zeros_like(X)
+    e_shared = stretch.local_into(shared, G_shared)
+    alone = LocalState(X, rotations=shared.rotations)
+    G_alone = np.zeros_like(X)
+    e_alone = stretch.local_into(alone, G_alone)
+    # the same differences of the same positions: equal to the last bit
+    assert e_shared == e_alone and np.array_equal(G_shared, G_alone)
