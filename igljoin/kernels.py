@@ -4,8 +4,11 @@ Every iteration of the join evaluates, for the current positions, each
 term's energy and half-gradient (:meth:`igljoin.terms.Term.local`). In numpy
 that is a few dozen array passes, sparse products and gathers per step —
 about 2 ms on a paper-sized guest, most of the iteration. The functions here
-do the same work as one loop over vertices or edges each, compiled by numba
-(``cache=True``: compiled once per machine, then loaded from the cache).
+do the same work in a few loops over vertices or edges, compiled by numba
+(``cache=True``: compiled once per machine, then loaded from the cache); the
+rotation fit steps a block of vertices at a time through branch-free loops
+that the compiler vectorises, each vertex still through exactly its own
+sequence of operations.
 
 They are exact re-statements of the numpy local steps in
 :mod:`igljoin.terms`, which stay as the reference implementation: a term
@@ -31,7 +34,6 @@ __all__ = [
     "stretch_local",
     "smooth_local",
     "band_local",
-    "incidence",
     "dot",
     "place_rows",
     "take_rows",
@@ -45,27 +47,6 @@ __all__ = [
 _STEP_TOLERANCE = 1e-7
 _MAX_STEPS = 8
 _DEGENERATE = 1e-9
-
-
-def incidence(E: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Edges incident to each vertex in CSR form.
-
-    Parameters
-    ----------
-    E : ndarray of int64, shape (e, 2)
-    n : int
-
-    Returns
-    -------
-    ptr : ndarray of int64, shape (n + 1,)
-    edges : ndarray of int64, shape (2 e,)
-        ``edges[ptr[v]:ptr[v + 1]]`` are the edges with ``v`` as an endpoint.
-    """
-    ends = E.reshape(-1)
-    order = np.argsort(ends, kind="stable")
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(ends, minlength=n), out=ptr[1:])
-    return ptr, (order // 2).astype(np.int64)
 
 
 @nb.njit(cache=True, inline="always")
@@ -111,14 +92,98 @@ def edge_vectors(X, E):  # pragma: no cover - compiled
     return d
 
 
-@nb.njit(cache=True)
-def _newton_rotation(A, R):  # pragma: no cover - compiled
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _newton_step(
+    a00, a01, a02, a10, a11, a12, a20, a21, a22, r00, r01, r02, r10, r11, r12, r20, r21, r22
+):  # pragma: no cover - compiled
+    """One Newton step on SO(3) for ``max tr(Rᵀ A)`` from ``R``, in scalars.
+
+    See igljoin.rotations._newton_step. Returns ``ok`` (the Hessian is
+    positive definite, relative margin ``_DEGENERATE``, and the step
+    finite), the step's size ``θ`` and the nine entries of the new ``R``
+    (row by row); the new ``R`` is meaningful only where ``ok``. Without
+    branches, so that a loop over a block of vertices stays vectorised
+    (:func:`_newton_lanes`); its callers use the numpy error model, as a
+    step whose ``ok`` is false may divide by zero.
+    """
+    # M = Rᵀ A
+    m00 = r00 * a00 + r10 * a10 + r20 * a20
+    m01 = r00 * a01 + r10 * a11 + r20 * a21
+    m02 = r00 * a02 + r10 * a12 + r20 * a22
+    m10 = r01 * a00 + r11 * a10 + r21 * a20
+    m11 = r01 * a01 + r11 * a11 + r21 * a21
+    m12 = r01 * a02 + r11 * a12 + r21 * a22
+    m20 = r02 * a00 + r12 * a10 + r22 * a20
+    m21 = r02 * a01 + r12 * a11 + r22 * a21
+    m22 = r02 * a02 + r12 * a12 + r22 * a22
+    s0 = m12 - m21
+    s1 = m20 - m02
+    s2 = m01 - m10
+    tr = m00 + m11 + m22
+    a = tr - m00
+    d = tr - m11
+    f = tr - m22
+    b = -0.5 * (m01 + m10)
+    c = -0.5 * (m02 + m20)
+    e = -0.5 * (m12 + m21)
+    c00 = d * f - e * e
+    c01 = c * e - b * f
+    c02 = b * e - c * d
+    c11 = a * f - c * c
+    c12 = b * c - a * e
+    c22 = a * d - b * b
+    det = a * c00 + b * c01 + c * c02
+    scale = abs(a) + abs(d) + abs(f) + 1e-300
+    positive = (
+        (a > _DEGENERATE * scale)
+        & (c22 > _DEGENERATE * scale * scale)
+        & (det > _DEGENERATE * scale * scale * scale)
+    )
+    inv = -1.0 / det
+    w0 = (c00 * s0 + c01 * s1 + c02 * s2) * inv
+    w1 = (c01 * s0 + c11 * s1 + c12 * s2) * inv
+    w2 = (c02 * s0 + c12 * s1 + c22 * s2) * inv
+    theta = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    # Cayley retraction of the half step (exactly orthogonal)
+    w0 *= 0.5
+    w1 *= 0.5
+    w2 *= 0.5
+    alpha = 2.0 / (1.0 + w0 * w0 + w1 * w1 + w2 * w2)
+    e00 = 1.0 - alpha * (w1 * w1 + w2 * w2)
+    e11 = 1.0 - alpha * (w0 * w0 + w2 * w2)
+    e22 = 1.0 - alpha * (w0 * w0 + w1 * w1)
+    p01 = alpha * w0 * w1
+    p02 = alpha * w0 * w2
+    p12 = alpha * w1 * w2
+    e01 = p01 - alpha * w2
+    e10 = p01 + alpha * w2
+    e02 = p02 + alpha * w1
+    e20 = p02 - alpha * w1
+    e12 = p12 - alpha * w0
+    e21 = p12 + alpha * w0
+    return (
+        positive & (theta < math.inf),
+        theta,
+        r00 * e00 + r01 * e10 + r02 * e20,
+        r00 * e01 + r01 * e11 + r02 * e21,
+        r00 * e02 + r01 * e12 + r02 * e22,
+        r10 * e00 + r11 * e10 + r12 * e20,
+        r10 * e01 + r11 * e11 + r12 * e21,
+        r10 * e02 + r11 * e12 + r12 * e22,
+        r20 * e00 + r21 * e10 + r22 * e20,
+        r20 * e01 + r21 * e11 + r22 * e21,
+        r20 * e02 + r21 * e12 + r22 * e22,
+    )
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _newton_rotation(A, R, steps):  # pragma: no cover - compiled
     """Newton on SO(3) for ``max tr(Rᵀ A)`` from ``R`` (3 × 3, updated in place).
 
-    Returns whether it settled at a maximum (a local maximum of ``tr(Rᵀ A)``
-    on SO(3) is the global one); see igljoin.rotations._newton_step. Works on
-    scalars: small-array operations inside a per-vertex loop cost more than
-    the arithmetic.
+    At most ``steps`` steps (:func:`_newton_step`). Returns whether it
+    settled at a maximum (a local maximum of ``tr(Rᵀ A)`` on SO(3) is the
+    global one). Works on scalars: small-array operations inside a
+    per-vertex loop cost more than the arithmetic.
     """
     a00, a01, a02 = A[0, 0], A[0, 1], A[0, 2]
     a10, a11, a12 = A[1, 0], A[1, 1], A[1, 2]
@@ -127,80 +192,16 @@ def _newton_rotation(A, R):  # pragma: no cover - compiled
     r10, r11, r12 = R[1, 0], R[1, 1], R[1, 2]
     r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
     settled = False
-    for _ in range(_MAX_STEPS):
-        # M = Rᵀ A
-        m00 = r00 * a00 + r10 * a10 + r20 * a20
-        m01 = r00 * a01 + r10 * a11 + r20 * a21
-        m02 = r00 * a02 + r10 * a12 + r20 * a22
-        m10 = r01 * a00 + r11 * a10 + r21 * a20
-        m11 = r01 * a01 + r11 * a11 + r21 * a21
-        m12 = r01 * a02 + r11 * a12 + r21 * a22
-        m20 = r02 * a00 + r12 * a10 + r22 * a20
-        m21 = r02 * a01 + r12 * a11 + r22 * a21
-        m22 = r02 * a02 + r12 * a12 + r22 * a22
-        s0 = m12 - m21
-        s1 = m20 - m02
-        s2 = m01 - m10
-        tr = m00 + m11 + m22
-        a = tr - m00
-        d = tr - m11
-        f = tr - m22
-        b = -0.5 * (m01 + m10)
-        c = -0.5 * (m02 + m20)
-        e = -0.5 * (m12 + m21)
-        c00 = d * f - e * e
-        c01 = c * e - b * f
-        c02 = b * e - c * d
-        c11 = a * f - c * c
-        c12 = b * c - a * e
-        c22 = a * d - b * b
-        det = a * c00 + b * c01 + c * c02
-        scale = abs(a) + abs(d) + abs(f) + 1e-300
-        if not (
-            a > _DEGENERATE * scale
-            and c22 > _DEGENERATE * scale * scale
-            and det > _DEGENERATE * scale * scale * scale
-        ):
+    for _ in range(steps):
+        ok, theta, n00, n01, n02, n10, n11, n12, n20, n21, n22 = _newton_step(
+            a00, a01, a02, a10, a11, a12, a20, a21, a22,
+            r00, r01, r02, r10, r11, r12, r20, r21, r22,
+        )  # fmt: skip
+        if not ok:
             break
-        inv = -1.0 / det
-        w0 = (c00 * s0 + c01 * s1 + c02 * s2) * inv
-        w1 = (c01 * s0 + c11 * s1 + c12 * s2) * inv
-        w2 = (c02 * s0 + c12 * s1 + c22 * s2) * inv
-        theta = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-        if not math.isfinite(theta):
-            break
-        # Cayley retraction of the half step (exactly orthogonal)
-        w0 *= 0.5
-        w1 *= 0.5
-        w2 *= 0.5
-        alpha = 2.0 / (1.0 + w0 * w0 + w1 * w1 + w2 * w2)
-        e00 = 1.0 - alpha * (w1 * w1 + w2 * w2)
-        e11 = 1.0 - alpha * (w0 * w0 + w2 * w2)
-        e22 = 1.0 - alpha * (w0 * w0 + w1 * w1)
-        p01 = alpha * w0 * w1
-        p02 = alpha * w0 * w2
-        p12 = alpha * w1 * w2
-        e01 = p01 - alpha * w2
-        e10 = p01 + alpha * w2
-        e02 = p02 + alpha * w1
-        e20 = p02 - alpha * w1
-        e12 = p12 - alpha * w0
-        e21 = p12 + alpha * w0
-        r00, r01, r02 = (
-            r00 * e00 + r01 * e10 + r02 * e20,
-            r00 * e01 + r01 * e11 + r02 * e21,
-            r00 * e02 + r01 * e12 + r02 * e22,
-        )
-        r10, r11, r12 = (
-            r10 * e00 + r11 * e10 + r12 * e20,
-            r10 * e01 + r11 * e11 + r12 * e21,
-            r10 * e02 + r11 * e12 + r12 * e22,
-        )
-        r20, r21, r22 = (
-            r20 * e00 + r21 * e10 + r22 * e20,
-            r20 * e01 + r21 * e11 + r22 * e21,
-            r20 * e02 + r21 * e12 + r22 * e22,
-        )
+        r00, r01, r02 = n00, n01, n02
+        r10, r11, r12 = n10, n11, n12
+        r20, r21, r22 = n20, n21, n22
         if theta <= _STEP_TOLERANCE:
             settled = True
             break
@@ -210,14 +211,131 @@ def _newton_rotation(A, R):  # pragma: no cover - compiled
     return settled
 
 
+# The rotation fit started from hints works on blocks of _LANES vertices held in one
+# buffer of rows of _LANES entries (rows _ROW_A.. the covariances, _ROW_R.. the
+# rotations, then one flag row each): every loop over a block's lanes runs on one
+# array without branches, which the compiler turns into vector instructions.
+_LANES = 64
+_ROW_A = 0
+_ROW_R = 9
+_ROW_ACTIVE = 18
+_ROW_SETTLED = 19
+_ROWS = 20
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _newton_lanes(buf):  # pragma: no cover - compiled
+    """One step of :func:`_newton_rotation` on every active lane of a block.
+
+    ``buf`` holds ``_ROWS`` rows of ``_LANES`` entries. A lane's rotation
+    changes exactly as :func:`_newton_rotation`'s would (the same
+    :func:`_newton_step`); a lane whose step breaks off keeps its rotation
+    and goes inactive, one whose step settles is marked settled and goes
+    inactive. Inactive lanes are computed too and their results dropped.
+    """
+    W = _LANES
+    for v in range(W):
+        r00 = buf[(_ROW_R + 0) * W + v]
+        r01 = buf[(_ROW_R + 1) * W + v]
+        r02 = buf[(_ROW_R + 2) * W + v]
+        r10 = buf[(_ROW_R + 3) * W + v]
+        r11 = buf[(_ROW_R + 4) * W + v]
+        r12 = buf[(_ROW_R + 5) * W + v]
+        r20 = buf[(_ROW_R + 6) * W + v]
+        r21 = buf[(_ROW_R + 7) * W + v]
+        r22 = buf[(_ROW_R + 8) * W + v]
+        ok, theta, n00, n01, n02, n10, n11, n12, n20, n21, n22 = _newton_step(
+            buf[(_ROW_A + 0) * W + v], buf[(_ROW_A + 1) * W + v], buf[(_ROW_A + 2) * W + v],
+            buf[(_ROW_A + 3) * W + v], buf[(_ROW_A + 4) * W + v], buf[(_ROW_A + 5) * W + v],
+            buf[(_ROW_A + 6) * W + v], buf[(_ROW_A + 7) * W + v], buf[(_ROW_A + 8) * W + v],
+            r00, r01, r02, r10, r11, r12, r20, r21, r22,
+        )  # fmt: skip
+        go = (buf[_ROW_ACTIVE * W + v] != 0.0) & ok
+        done = go & (theta <= _STEP_TOLERANCE)
+        buf[(_ROW_R + 0) * W + v] = n00 if go else r00
+        buf[(_ROW_R + 1) * W + v] = n01 if go else r01
+        buf[(_ROW_R + 2) * W + v] = n02 if go else r02
+        buf[(_ROW_R + 3) * W + v] = n10 if go else r10
+        buf[(_ROW_R + 4) * W + v] = n11 if go else r11
+        buf[(_ROW_R + 5) * W + v] = n12 if go else r12
+        buf[(_ROW_R + 6) * W + v] = n20 if go else r20
+        buf[(_ROW_R + 7) * W + v] = n21 if go else r21
+        buf[(_ROW_R + 8) * W + v] = n22 if go else r22
+        buf[_ROW_SETTLED * W + v] = 1.0 if done else buf[_ROW_SETTLED * W + v]
+        buf[_ROW_ACTIVE * W + v] = 1.0 if (go & ~done) else 0.0
+
+
+@nb.njit(cache=True)
+def _fit_rotations(A, hint, R, failed):  # pragma: no cover - compiled
+    """Rotations maximising ``tr(R_vᵀ A_v)``, each by Newton from ``hint[v]``.
+
+    ``A``, ``hint``, ``R`` have shape (n, 3, 3); ``failed`` (n,) is set where
+    Newton did not settle at a maximum (``R`` is then the last iterate).
+    Each vertex ends exactly as :func:`_newton_rotation` from its hint would:
+    blocks of vertices step together (:func:`_newton_lanes`) while more than
+    a quarter of a block still moves; the few left finish one by one.
+    Returns whether any failed.
+    """
+    n = A.shape[0]
+    W = _LANES
+    buf = np.empty(_ROWS * W)
+    Av = np.empty((3, 3))
+    Rv = np.empty((3, 3))
+    any_failed = False
+    for start in range(0, n, W):
+        m = min(W, n - start)
+        for v in range(W):
+            if v < m:
+                for b in range(3):
+                    for a in range(3):
+                        buf[(_ROW_A + 3 * b + a) * W + v] = A[start + v, b, a]
+                        buf[(_ROW_R + 3 * b + a) * W + v] = hint[start + v, b, a]
+                buf[_ROW_ACTIVE * W + v] = 1.0
+            else:
+                # padding lanes: inactive, with finite values
+                for k in range(9):
+                    buf[(_ROW_A + k) * W + v] = 1.0 if k % 4 == 0 else 0.0
+                    buf[(_ROW_R + k) * W + v] = 1.0 if k % 4 == 0 else 0.0
+                buf[_ROW_ACTIVE * W + v] = 0.0
+            buf[_ROW_SETTLED * W + v] = 0.0
+        steps = 0
+        active = m
+        while steps < _MAX_STEPS and 4 * active > W:
+            _newton_lanes(buf)
+            steps += 1
+            active = 0
+            for v in range(W):
+                if buf[_ROW_ACTIVE * W + v] != 0.0:
+                    active += 1
+        for v in range(m):
+            settled = buf[_ROW_SETTLED * W + v] != 0.0
+            if buf[_ROW_ACTIVE * W + v] != 0.0 and steps < _MAX_STEPS:
+                for b in range(3):
+                    for a in range(3):
+                        Av[b, a] = buf[(_ROW_A + 3 * b + a) * W + v]
+                        Rv[b, a] = buf[(_ROW_R + 3 * b + a) * W + v]
+                settled = _newton_rotation(Av, Rv, _MAX_STEPS - steps)
+                for b in range(3):
+                    for a in range(3):
+                        buf[(_ROW_R + 3 * b + a) * W + v] = Rv[b, a]
+            for b in range(3):
+                for a in range(3):
+                    R[start + v, b, a] = buf[(_ROW_R + 3 * b + a) * W + v]
+            if not settled:
+                failed[start + v] = True
+                any_failed = True
+    return any_failed
+
+
 @nb.njit(cache=True)
 def shape_local(
-    X, E, Lp, Li, Lx, delta, rest_edges, inc_ptr, inc_edges, mu, w, hint, LX, A, R, G
+    X, E, Lp, Li, Lx, delta, rest_edges, mu, w, hint, LX, A, R, d, G
 ):  # pragma: no cover - compiled
     """The rotation-aware Laplacian term in one call: rotations, energy, half-gradient.
 
-    A pass over the vertices computes ``l(p′)_v``, the covariance and the
-    rotation (Newton on SO(3) from the hint); if every rotation settled,
+    A pass over the vertices computes ``l(p′)_v`` and the covariances, a
+    second the rotations (Newton on SO(3) from the hints, a block of
+    vertices at a time: :func:`_fit_rotations`); if every rotation settled,
     :func:`shape_residuals` follows in the same call.
 
     Parameters
@@ -230,8 +348,6 @@ def shape_local(
     delta : ndarray, shape (n, 3)
         Rest Laplacian coordinates ``L V0``.
     rest_edges : ndarray, shape (e, 3)
-    inc_ptr, inc_edges : ndarray of int64
-        Edges incident to each vertex (:func:`incidence`).
     mu : float
         Weight of the one-ring edges.
     w : float
@@ -245,6 +361,8 @@ def shape_local(
         Output: covariances ``A_v = l(p′)_v δ_vᵀ + μ Σ_e d_e e0_eᵀ``.
     R : ndarray, shape (n, 3, 3)
         Output: rotations maximising ``tr(R_vᵀ A_v)`` where Newton settled.
+    d : ndarray, shape (e, 3)
+        Output: the edge vectors ``d_e`` (the stretch term's too).
     G : ndarray, shape (n, 3)
         Half-gradient, added to when every rotation settled.
 
@@ -258,52 +376,71 @@ def shape_local(
         caller (libigl's SVD fit).
     """
     n = X.shape[0]
-    use_hint = hint.shape[0] == n
     failed = np.zeros(n, dtype=np.bool_)
-    any_failed = False
-    Rv = np.zeros((3, 3))
-    for b in range(3):
-        Rv[b, b] = 1.0
-    for v in range(n):
+    _covariances(X, E, Lp, Li, Lx, delta, rest_edges, mu, LX, A, d)
+    if hint.shape[0] == n:
+        any_failed = _fit_rotations(A, hint, R, failed)
+    else:
+        any_failed = _chain_rotations(A, R, failed)
+    if any_failed:
+        return 0.0, failed
+    return shape_residuals(d, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G), failed
+
+
+@nb.njit(cache=True)
+def _covariances(X, E, Lp, Li, Lx, delta, rest_edges, mu, LX, A, d):  # pragma: no cover
+    """``L X`` into ``LX`` (n, 3), the covariances into ``A`` (n, 3, 3), ``d_e`` into ``d`` (e, 3).
+
+    ``A_v`` starts as ``l(p′)_v δ_vᵀ``; a pass over the edges then adds
+    ``μ d_e e0_eᵀ`` to both ends, so each ``A_v`` sums its edges in the
+    order of their indices. See :func:`shape_local`.
+    """
+    for v in range(X.shape[0]):
         s0, s1, s2 = _row_times(Lp, Li, Lx, X, v)
         LX[v, 0] = s0
         LX[v, 1] = s1
         LX[v, 2] = s2
-        # the covariance in scalars (kept in registers; the sums in the same order)
         x0 = delta[v, 0]
         x1 = delta[v, 1]
         x2 = delta[v, 2]
-        c00, c01, c02 = s0 * x0, s0 * x1, s0 * x2
-        c10, c11, c12 = s1 * x0, s1 * x1, s1 * x2
-        c20, c21, c22 = s2 * x0, s2 * x1, s2 * x2
-        for k in range(inc_ptr[v], inc_ptr[v + 1]):
-            e = inc_edges[k]
-            i = E[e, 0]
-            j = E[e, 1]
-            e0 = rest_edges[e, 0]
-            e1 = rest_edges[e, 1]
-            e2 = rest_edges[e, 2]
-            db = mu * (X[i, 0] - X[j, 0])
-            c00 += db * e0
-            c01 += db * e1
-            c02 += db * e2
-            db = mu * (X[i, 1] - X[j, 1])
-            c10 += db * e0
-            c11 += db * e1
-            c12 += db * e2
-            db = mu * (X[i, 2] - X[j, 2])
-            c20 += db * e0
-            c21 += db * e1
-            c22 += db * e2
         Av = A[v]
-        Av[0, 0], Av[0, 1], Av[0, 2] = c00, c01, c02
-        Av[1, 0], Av[1, 1], Av[1, 2] = c10, c11, c12
-        Av[2, 0], Av[2, 1], Av[2, 2] = c20, c21, c22
-        if use_hint:
-            for b in range(3):
-                for a in range(3):
-                    Rv[b, a] = hint[v, b, a]
-        if _newton_rotation(Av, Rv):
+        Av[0, 0], Av[0, 1], Av[0, 2] = s0 * x0, s0 * x1, s0 * x2
+        Av[1, 0], Av[1, 1], Av[1, 2] = s1 * x0, s1 * x1, s1 * x2
+        Av[2, 0], Av[2, 1], Av[2, 2] = s2 * x0, s2 * x1, s2 * x2
+    for e in range(E.shape[0]):
+        i = E[e, 0]
+        j = E[e, 1]
+        e0 = rest_edges[e, 0]
+        e1 = rest_edges[e, 1]
+        e2 = rest_edges[e, 2]
+        for b in range(3):
+            dc = X[i, b] - X[j, b]
+            d[e, b] = dc
+            db = mu * dc
+            p0 = db * e0
+            p1 = db * e1
+            p2 = db * e2
+            A[i, b, 0] += p0
+            A[i, b, 1] += p1
+            A[i, b, 2] += p2
+            A[j, b, 0] += p0
+            A[j, b, 1] += p1
+            A[j, b, 2] += p2
+
+
+@nb.njit(cache=True)
+def _chain_rotations(A, R, failed):  # pragma: no cover - compiled
+    """:func:`_fit_rotations` without hints: each vertex starts from the previous one's rotation.
+
+    The first starts from the identity, and so does the one after a vertex
+    that failed. Returns whether any failed.
+    """
+    Rv = np.zeros((3, 3))
+    for b in range(3):
+        Rv[b, b] = 1.0
+    any_failed = False
+    for v in range(A.shape[0]):
+        if _newton_rotation(A[v], Rv, _MAX_STEPS):
             for b in range(3):
                 for a in range(3):
                     R[v, b, a] = Rv[b, a]
@@ -313,19 +450,17 @@ def shape_local(
             for b in range(3):
                 for a in range(3):
                     Rv[b, a] = 1.0 if a == b else 0.0
-    if any_failed:
-        return 0.0, failed
-    return shape_residuals(X, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G), failed
+    return any_failed
 
 
 @nb.njit(cache=True)
-def shape_residuals(X, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G):  # pragma: no cover
+def shape_residuals(d, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G):  # pragma: no cover
     """Second half of the rotation-aware Laplacian term: energy and half-gradient.
 
     With the rotations ``R`` (n, 3, 3) fitted, returns the energy
     ``w (Σ ‖l(p′)_v − R_v δ_v‖² + μ Σ_e (‖d_e − R_i e0‖² + ‖d_e − R_j e0‖²))``
-    and adds ``w (Lᵀ r + μ Dᵀ (r0 + r1))`` to ``G`` (n, 3). Arguments as in
-    :func:`shape_local`.
+    and adds ``w (Lᵀ r + μ Dᵀ (r0 + r1))`` to ``G`` (n, 3). ``d`` (e, 3) are
+    the edge vectors; the other arguments as in :func:`shape_local`.
     """
     n = LX.shape[0]
     energy_lap = 0.0
@@ -355,7 +490,7 @@ def shape_residuals(X, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G):  # pr
         s1 = 0.0
         s2 = 0.0
         for c in range(3):
-            dc = X[i, c] - X[j, c]
+            dc = d[e, c]
             ri = dc - (R[i, c, 0] * x0 + R[i, c, 1] * x1 + R[i, c, 2] * x2)
             rj = dc - (R[j, c, 0] * x0 + R[j, c, 1] * x1 + R[j, c, 2] * x2)
             energy_edges += ri * ri + rj * rj
@@ -370,10 +505,11 @@ def shape_residuals(X, E, Lp, Li, Lx, LX, delta, rest_edges, mu, w, R, G):  # pr
 
 
 @nb.njit(cache=True)
-def stretch_local(X, E, k, rest_length, rest, R, G):  # pragma: no cover - compiled
+def stretch_local(d, E, k, rest_length, rest, R, G):  # pragma: no cover - compiled
     """Edge-length term ``Σ k (|d| − L0)²``: return the energy, add the half-gradient.
 
-    ``d_e = X[E[e, 0]] − X[E[e, 1]]``. A collapsed edge (``|d| ≤ 1e-12 L0``)
+    ``d`` (e, 3) are the edge vectors ``d_e = X[E[e, 0]] − X[E[e, 1]]``
+    (:func:`edge_vectors`). A collapsed edge (``|d| ≤ 1e-12 L0``)
     is pulled to its rest vector, rotated by its first endpoint's rotation
     when ``R`` (n, 3, 3) is given (an empty ``R`` leaves it unrotated).
     """
@@ -382,9 +518,9 @@ def stretch_local(X, E, k, rest_length, rest, R, G):  # pragma: no cover - compi
     for e in range(E.shape[0]):
         i = E[e, 0]
         j = E[e, 1]
-        d0 = X[i, 0] - X[j, 0]
-        d1 = X[i, 1] - X[j, 1]
-        d2 = X[i, 2] - X[j, 2]
+        d0 = d[e, 0]
+        d1 = d[e, 1]
+        d2 = d[e, 2]
         length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         if length > 1e-12 * max(rest_length[e], 1e-300):
             gap = length - rest_length[e]

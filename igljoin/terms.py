@@ -203,11 +203,16 @@ def check_order(terms: list[Term]) -> None:
             )
 
 
+def _edges_key(E: np.ndarray) -> tuple:
+    """Key of the edge vectors over ``E`` (e, 2) in ``LocalState.cache``."""
+    return ("edges", id(E))
+
+
 def _edge_vectors(
     state: LocalState, E: np.ndarray, D: sp.csr_matrix, compiled: bool = True
 ) -> np.ndarray:
     """``X[E[:, 0]] − X[E[:, 1]]``, shape (e, 3), shared by the terms using the same ``E``."""
-    key = ("edges", id(E))
+    key = _edges_key(E)
     if key not in state.cache:
         state.cache[key] = kernels.edge_vectors(state.X, E) if compiled else D @ state.X
     return state.cache[key]
@@ -349,7 +354,6 @@ class ShapeTerm(Term):
             self._Lp = self.L.indptr.astype(np.int64)
             self._Li = self.L.indices.astype(np.int64)
             self._Lx = np.ascontiguousarray(self.L.data, dtype=np.float64)
-            self._inc_ptr, self._inc_edges = kernels.incidence(self.E, n)
             self._E_c = np.ascontiguousarray(self.E)
             self._delta_c = np.ascontiguousarray(self.delta, dtype=np.float64)
             self._rest_c = np.ascontiguousarray(self.rest_edges, dtype=np.float64)
@@ -495,7 +499,8 @@ class ShapeTerm(Term):
     def _local_compiled(self, state: LocalState, G: np.ndarray) -> float:
         """:meth:`local` by the compiled kernels, adding into ``G`` (n, 3).
 
-        Sets ``state.rotations``.
+        Sets ``state.rotations``, and leaves ``L X`` and the edge vectors in
+        ``state.cache`` for the terms after it (the stretch term's ``D X``).
 
         Vertices where the warm-started Newton fit does not settle get their
         rotation from libigl's SVD fit, as in :func:`igljoin.rotations.fit_rotations`.
@@ -507,21 +512,22 @@ class ShapeTerm(Term):
         LX = np.empty((n, 3))
         A = np.empty((n, 3, 3))
         R = np.empty((n, 3, 3))
+        d = np.empty((len(self._E_c), 3))
         mu = ROTATION_REGULARISATION
         e, failed_mask = kernels.shape_local(
             state.X, self._E_c, self._Lp, self._Li, self._Lx, self._delta_c, self._rest_c,
-            self._inc_ptr, self._inc_edges, mu, self.weight,
-            np.ascontiguousarray(hint, dtype=np.float64), LX, A, R, G,
+            mu, self.weight, np.ascontiguousarray(hint, dtype=np.float64), LX, A, R, d, G,
         )  # fmt: skip
         failed = np.flatnonzero(failed_mask)
         if failed.size:
             R[failed] = fit_rotations_igl(A[failed].transpose(1, 2, 0)).transpose(2, 0, 1)
             e = kernels.shape_residuals(
-                state.X, self._E_c, self._Lp, self._Li, self._Lx, LX, self._delta_c,
+                d, self._E_c, self._Lp, self._Li, self._Lx, LX, self._delta_c,
                 self._rest_c, mu, self.weight, R, G,
             )  # fmt: skip
         state.rotations = R
         state.cache["LX"] = LX
+        state.cache[_edges_key(self.E)] = d
         return float(e)
 
 
@@ -574,7 +580,8 @@ class StretchTerm(Term):
         if not self.compiled:
             return super().local_into(state, G)
         R = _NO_ROTATIONS if state.rotations is None else state.rotations
-        e = kernels.stretch_local(state.X, self.E, self.weights, self.rest_length, self.rest, R, G)
+        d = _edge_vectors(state, self.E, self.K, True)
+        e = kernels.stretch_local(d, self.E, self.weights, self.rest_length, self.rest, R, G)
         return float(e)
 
     def quadratic(self) -> sp.csr_matrix:

@@ -170,8 +170,63 @@ def test_terms_are_compiled_by_default_and_on_request(tube):
     assert not shape.compiled and not stretch.compiled
 
 
-def test_incidence_lists_each_edge_at_both_ends():
-    E = np.array([[0, 1], [1, 2], [2, 0], [2, 3]])
-    ptr, edges = kernels.incidence(E, 5)
-    at = [sorted(edges[ptr[v] : ptr[v + 1]].tolist()) for v in range(5)]
-    assert at == [[0, 2], [0, 1], [1, 2, 3], [3], []]
+def _rotation_fit_cases(seed):
+    """Covariances and hints of every kind the rotation fit meets, shape (n, 3, 3) each.
+
+    150 vertices (two blocks and a part of one): hints at their rotation, near
+    it (two Newton steps), 0.8 rad away (more steps), 2.5 rad away (Newton
+    breaks off), half a turn away (a saddle), and covariances of rank 2, and
+    of rank 1 or zero, shuffled so that every block mixes them.
+    """
+    rng = np.random.default_rng(seed)
+    n = 150
+    target = Rotation.random(n, random_state=seed).as_matrix()
+    A = target @ (np.eye(3) * rng.uniform(0.5, 3.0, size=(n, 1, 3)))
+    kind = rng.permutation(np.arange(n) % 7)
+    turn = np.array([0.0, 1e-3, 0.8, 2.5, 0.0, 0.0, 0.0])[kind]
+    axis = rng.normal(size=(n, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    hint = Rotation.from_rotvec(turn[:, None] * axis).as_matrix() @ target
+    half = kind == 4
+    hint[half] = Rotation.from_rotvec(np.pi * axis[half]).as_matrix() @ target[half]
+    A[kind == 5] = A[kind == 5] @ np.diag([1.0, 1.0, 0.0])
+    A[kind == 6] = np.outer([1.0, 0.0, 0.0], [0.0, 1.0, 0.0]) if seed % 2 else 0.0
+    return np.ascontiguousarray(A), np.ascontiguousarray(hint)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_block_rotation_fit_is_the_per_vertex_newton(seed):
+    """The fit a block at a time gives each vertex exactly its own Newton iteration's result."""
+    A, hint = _rotation_fit_cases(seed)
+    n = len(A)
+    R = np.empty_like(A)
+    failed = np.zeros(n, dtype=bool)
+    any_failed = kernels._fit_rotations(A, hint, R, failed)
+    ref = hint.copy()
+    settled = np.array([kernels._newton_rotation(A[v], ref[v], 8) for v in range(n)])
+    # the same operations in the same order: equal to the last bit, failures included
+    assert np.array_equal(R, ref)
+    assert np.array_equal(failed, ~settled)
+    assert any_failed == (not settled.all())
+    # the cases reach both outcomes, and some vertices settle only after three steps
+    assert settled.any() and not settled.all()
+    short = hint.copy()
+    assert any(settled[v] and not kernels._newton_rotation(A[v], short[v], 3) for v in range(n))
+
+
+def test_stretch_term_reads_the_edge_vectors_the_shape_term_left(tube):
+    """The shape term's step leaves ``D X`` for the stretch term; both give what they give alone."""
+    solver = _solver(tube)
+    shape, stretch = solver.terms[0], solver.terms[1]
+    X = _perturbed(solver, 0.3, 8)
+    shared = LocalState(X)
+    shape.local_into(shared, np.zeros_like(X))
+    left = [v for k, v in shared.cache.items() if isinstance(k, tuple) and k[0] == "edges"]
+    assert len(left) == 1 and np.array_equal(left[0], kernels.edge_vectors(X, stretch.E))
+    G_shared = np.zeros_like(X)
+    e_shared = stretch.local_into(shared, G_shared)
+    alone = LocalState(X, rotations=shared.rotations)
+    G_alone = np.zeros_like(X)
+    e_alone = stretch.local_into(alone, G_alone)
+    # the same differences of the same positions: equal to the last bit
+    assert e_shared == e_alone and np.array_equal(G_shared, G_alone)
