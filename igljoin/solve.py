@@ -48,7 +48,7 @@ from .errors import SolveError
 from .linsolve import AugmentedQuadratic, FixedQuadratic, available_backends
 from .terms import LocalState, SmoothJoinTerm, Term
 
-__all__ = ["LocalGlobalSolver", "IterationResult", "AUGMENT_FROM_COUPLINGS"]
+__all__ = ["LocalGlobalSolver", "IterationResult", "QuasiNewtonMemory", "AUGMENT_FROM_COUPLINGS"]
 
 #: Vertex pairs coupled by the band smooth-join rows (:func:`igljoin.terms.band_couplings`,
 #: the non-zeros of their block ``Kᵀ W K``) from which the solver keeps that block out
@@ -97,6 +97,10 @@ class IterationResult:
         decrease the energy enough), ``restarts`` (quasi-Newton memory
         dropped) and ``model_builds`` (builds and rebuilds of a ``model``
         during the run).
+    memory : QuasiNewtonMemory or None
+        The quasi-Newton pairs held at the end (``None`` for the plain
+        iteration): a later run of the same solver may start from them
+        (``run(memory=...)``).
     """
 
     X: np.ndarray
@@ -106,6 +110,7 @@ class IterationResult:
     reason: str = ""
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
+    memory: QuasiNewtonMemory | None = None
 
 
 class LocalGlobalSolver:
@@ -300,6 +305,7 @@ class LocalGlobalSolver:
         acceleration: int = 5,
         callback=None,
         model=None,
+        memory: QuasiNewtonMemory | None = None,
     ) -> IterationResult:
         """Iterate from ``X0`` (shape (n, 3)) until the iterates settle.
 
@@ -346,6 +352,12 @@ class LocalGlobalSolver:
             ``factorizations`` (its builds so far: those of this run are
             ``stats["model_builds"]``). The plain
             fallback step stays ``Q``'s.
+        memory : QuasiNewtonMemory, optional
+            Quasi-Newton pairs to start with (``IterationResult.memory`` of an
+            earlier run of this solver, e.g. the one whose result ``X0`` was
+            predicted from): the first step then already knows the curvature
+            they measured. Copied, not changed; ignored unless it holds pairs
+            of this run's ``acceleration`` and size.
 
         Returns
         -------
@@ -402,7 +414,10 @@ class LocalGlobalSolver:
         # g: half the gradient of E on the free rows
         state, e, g = local(x, None)
         energy = [e]
-        memory = _Memory(acceleration, g.shape)
+        if memory is not None and memory.fits(acceleration, g.shape):
+            memory = memory.copy()
+        else:
+            memory = QuasiNewtonMemory(acceleration, g.shape)
         step_tol = np.sqrt(tolerance) * scale
         floor = self.energy_floor(X, tolerance)
         for it in range(1, max_iterations + 1):
@@ -472,6 +487,7 @@ class LocalGlobalSolver:
         if model is not None:
             stats["model_builds"] = model.factorizations - builds_before
         result.stats = stats
+        result.memory = memory if acceleration > 0 else None
         return result
 
 
@@ -495,7 +511,7 @@ def _wide_term(terms: list[Term], linear_solver: str) -> Term | None:
     return wide[0]
 
 
-class _Memory:
+class QuasiNewtonMemory:
     """The last ``m`` quasi-Newton pairs ``(s, y)`` in ring buffers.
 
     Parameters
@@ -522,6 +538,19 @@ class _Memory:
         self.alpha = np.empty(rows)
         self.order: list[int] = []  # slots, oldest first
         self.unused = list(range(rows))
+
+    def fits(self, m: int, shape: tuple) -> bool:
+        """It holds pairs for a run with ``m`` pairs and iterates of ``shape``."""
+        return self.m == m and self.S.shape[1] == int(np.prod(shape))
+
+    def copy(self) -> QuasiNewtonMemory:
+        """An independent copy (its buffers copied)."""
+        out = QuasiNewtonMemory(0, (0,))
+        out.m = self.m
+        out.S, out.Y = self.S.copy(), self.Y.copy()
+        out.rho, out.alpha = self.rho.copy(), self.alpha.copy()
+        out.order, out.unused = list(self.order), list(self.unused)
+        return out
 
     @property
     def size(self) -> int:
