@@ -37,6 +37,7 @@ convergence by about 40 % (docs/benchmarks.md), to the same minimum.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -159,6 +160,7 @@ class LocalGlobalSolver:
         self.linear_solver = linear_solver
         self.wide = _wide_term(terms, linear_solver)
         self._Q = self._P = None
+        self._stiffness_bound: float | None = None
         if self.wide is None:
             parts = [term.quadratic() for term in terms]
             self._Q = sp.csr_matrix(sum(parts, sp.csr_matrix((n, n))))
@@ -252,6 +254,23 @@ class LocalGlobalSolver:
         """Response to a unit load with the fixed vertices at zero: ``P φ = 1``, shape (n,)."""
         out = self.factor.solve(np.ones((self.n, 1)), np.zeros((len(self.fixed), 1)))
         return out[:, 0]
+
+    def stiffness_bound(self) -> float | None:
+        """An upper bound of ``Q``'s largest eigenvalue (its largest absolute row sum), made once.
+
+        ``None`` where ``Q`` is not formed (the band block kept apart).
+        """
+        if self.wide is not None:
+            return None
+        if self._stiffness_bound is None:
+            # read from the stored entries (duplicates counted apart: a larger bound, still
+            # one); scipy's abs() would sort Q's indices in place, and with them the
+            # order its products sum in
+            Q = self.Q
+            rows = np.repeat(np.arange(Q.shape[0]), np.diff(Q.indptr))
+            sums = np.bincount(rows, weights=np.abs(Q.data), minlength=Q.shape[0])
+            self._stiffness_bound = float(sums.max(initial=0.0))
+        return self._stiffness_bound
 
     def energy_floor(self, X: np.ndarray, tolerance: float) -> float:
         """Energy below which ``X``'s neighbourhood counts as a zero-energy minimum.
@@ -419,7 +438,8 @@ class LocalGlobalSolver:
         else:
             memory = QuasiNewtonMemory(acceleration, g.shape)
         step_tol = np.sqrt(tolerance) * scale
-        floor = self.energy_floor(X, tolerance)
+        # the floor, made only when it decides (see _FloorTest)
+        floor = _FloorTest(self, X, tolerance)
         for it in range(1, max_iterations + 1):
             hint = state.rotations
             if model is not None and acceleration > 0:
@@ -469,8 +489,9 @@ class LocalGlobalSolver:
             if callback is not None:
                 callback(it, e)
             window = energy[max(0, len(energy) - 1 - _WINDOW)] - e
-            settled = (it >= 2 and abs(window) <= tolerance * max(e, 1e-300)) or e <= floor
-            if settled and move <= step_tol:
+            if move <= step_tol and (
+                (it >= 2 and abs(window) <= tolerance * max(e, 1e-300)) or floor.reached(e)
+            ):
                 result.converged, result.reason = True, "tolerance"
                 break
             if time_limit is not None and time.perf_counter() - start > time_limit:
@@ -509,6 +530,34 @@ def _wide_term(terms: list[Term], linear_solver: str) -> Term | None:
     if len(wide) != 1 or "pardiso" not in available_backends():
         return None
     return wide[0]
+
+
+class _FloorTest:
+    """``e <= solver.energy_floor(X, tolerance)``, with the floor made only when it may hold.
+
+    The floor is ``tolerance² tr(X̄ᵀ Q X̄)``, at most ``tolerance² λ ‖X̄‖²`` with
+    ``λ`` :meth:`LocalGlobalSolver.stiffness_bound`; an energy above that bound
+    (every real join's, by orders) is above the floor without making it (a
+    sparse product with ``Q``), and the answer is the same.
+    """
+
+    def __init__(self, solver: LocalGlobalSolver, X: np.ndarray, tolerance: float):
+        self.solver, self.X, self.tolerance = solver, X, tolerance
+        self.floor: float | None = None
+        self.bound = math.inf
+        stiffness = solver.stiffness_bound()
+        if stiffness is not None:
+            Xc = X - np.mean(X, axis=0)
+            # 1e-6: far above the rounding of either sum, so the bound stays a bound
+            self.bound = (1.0 + 1e-6) * tolerance * tolerance * stiffness * float(np.vdot(Xc, Xc))
+
+    def reached(self, e: float) -> bool:
+        """The energy ``e`` is at or below the floor."""
+        if e > self.bound:
+            return False
+        if self.floor is None:
+            self.floor = self.solver.energy_floor(self.X, self.tolerance)
+        return e <= self.floor
 
 
 class QuasiNewtonMemory:

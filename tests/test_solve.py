@@ -579,6 +579,25 @@ def test_a_run_started_with_pairs_reaches_the_same_minimum(patch):
     assert other.energy == ls.run(X0, T, **{**kw, "acceleration": 5}).energy
 
 
+def test_the_floor_is_made_only_where_it_can_decide(tube):
+    """The floor test answers as ``e <= energy_floor`` and makes the floor only near it."""
+    from igljoin.solve import _FloorTest
+
+    solver = _solver(tube)
+    ls, X = solver.solver, solver.initial_guess()
+    tol = solver.options.energy_tolerance
+    floor = ls.energy_floor(X, tol)
+    test = _FloorTest(ls, X, tol)
+    assert floor <= test.bound < np.inf
+    for e in (0.0, 0.5 * floor, floor, np.nextafter(floor, np.inf), 2.0 * floor, 10 * test.bound):
+        assert _FloorTest(ls, X, tol).reached(e) == (e <= floor), e
+    # an energy above the bound (every real join's) never makes the floor
+    test.reached(2.0 * test.bound)
+    assert test.floor is None
+    test.reached(floor)
+    assert test.floor == floor
+
+
 # -- reuse of the factorization across solves ----------------------------------------------
 
 
