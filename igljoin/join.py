@@ -65,6 +65,11 @@ KEPT_RESULTS = 4
 #: same pairs (the same result, to the bit).
 PAIRS_KEPT = 2
 
+#: Bytes of one run's quasi-Newton pairs up to which they are kept: 2 (acceleration + 1)
+#: 3n' floats, 53 MB at 100k guest vertices with the default acceleration, 0.5 GB at 1M,
+#: where a path's re-solves start without them rather than hold twice that.
+PAIRS_MAX_BYTES = 1 << 28
+
 
 @dataclass(frozen=True)
 class _Kept:
@@ -190,7 +195,8 @@ class JoinSolver:
     copies of the guest positions, each with the result of the path before
     it (so a solve in between, e.g. a cold one, does not cut a path), and
     the quasi-Newton pairs of the newest ``PAIRS_KEPT`` (2) results on a
-    path (2 × (acceleration + 1) × 3n' floats each); an option change that
+    path (2 × (acceleration + 1) × 3n' floats each, kept up to
+    ``PAIRS_MAX_BYTES``, 256 MiB); an option change that
     rebuilds the factorization forgets them, a change of the iteration
     settings does not (it leaves the minima where they are).
 
@@ -423,6 +429,8 @@ class JoinSolver:
             return  # not a minimum: nothing to predict from
         earlier = () if before is None else (*before.earlier, before.X)[-PATH_LENGTH:]
         memory = run.memory if earlier else None
+        if memory is not None and memory.S.nbytes + memory.Y.nbytes > PAIRS_MAX_BYTES:
+            memory = None
         kept = [*self._kept, _Kept(np.array(X, dtype=np.float64), earlier, memory)]
         # the pairs are large (2 (acceleration + 1) 3n' floats): the newest PAIRS_KEPT only
         holding = [i for i, k in enumerate(kept) if k.memory is not None][:-PAIRS_KEPT]

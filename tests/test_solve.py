@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -557,6 +559,23 @@ def test_a_re_solve_along_a_path_starts_with_the_quasi_newton_pairs_before(patch
     # the plain iteration holds no pairs and keeps none
     plain = solver.solve(_turned(T0, 3), start=step2, acceleration=0, max_iterations=3000)
     assert plain.converged and solver.last_run.memory is None
+
+
+def test_pairs_larger_than_the_limit_are_not_kept(patch, monkeypatch):
+    """Above ``PAIRS_MAX_BYTES`` a path's re-solves start without pairs (and hold none)."""
+    join_module = importlib.import_module("igljoin.join")  # igljoin.join is the function
+    solver = _solver(patch)
+    first = solver.solve()
+    T0 = first.seam_targets
+    step1 = solver.solve(_turned(T0, 1), start=first)
+    size = solver.last_run.memory.S.nbytes + solver.last_run.memory.Y.nbytes
+    monkeypatch.setattr(join_module, "PAIRS_MAX_BYTES", size - 1)
+    step2 = solver.solve(_turned(T0, 2), start=step1)
+    assert step2.converged and np.array_equal(solver._kept[-1].X, step2.guest.V)
+    assert solver._kept[-1].memory is None
+    monkeypatch.setattr(join_module, "PAIRS_MAX_BYTES", size)
+    solver.solve(_turned(T0, 3), start=step2)
+    assert solver._kept[-1].memory is not None
 
 
 def test_a_run_started_with_pairs_reaches_the_same_minimum(patch):
