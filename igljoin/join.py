@@ -14,7 +14,7 @@ the fixed vertices of one factorization.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -54,6 +54,42 @@ HOST_CHECK_ALL_FACES = 200_000
 #: three times over, and along a long drag those errors grew: 30 steps of 0.5° on the
 #: paper samples took 506-802 iterations in all with two against 309-374 with one.
 PATH_LENGTH = 1
+
+#: Converged results a solver keeps, each with the results of the path that led to it,
+#: so that a re-solve from any of them finds its path: a solve in between (e.g. a cold
+#: solve for comparison) does not cut the path it is not on.
+KEPT_RESULTS = 4
+
+#: Kept results on a path whose run's quasi-Newton pairs are kept too, the newest: two,
+#: so that the step from the result before the newest can be solved again with the
+#: same pairs (the same result, to the bit).
+PAIRS_KEPT = 2
+
+#: Bytes of one run's quasi-Newton pairs up to which they are kept: 2 (acceleration + 1)
+#: 3n' floats, 53 MB at 100k guest vertices with the default acceleration, 0.5 GB at 1M,
+#: where a path's re-solves start without them rather than hold twice that.
+PAIRS_MAX_BYTES = 1 << 28
+
+
+@dataclass(frozen=True)
+class _Kept:
+    """A converged result the solver keeps: where a path of re-solves may continue.
+
+    Attributes
+    ----------
+    X : ndarray, shape (n', 3)
+        Its guest positions (a copy).
+    earlier : tuple of ndarray
+        The results of the path before it, oldest first (at most ``PATH_LENGTH``;
+        none for a solve from the initial guess).
+    memory : QuasiNewtonMemory or None
+        Its run's quasi-Newton pairs, kept for a result on a path (``earlier``
+        not empty): the next re-solve along the path starts with them.
+    """
+
+    X: np.ndarray
+    earlier: tuple
+    memory: Any
 
 
 def _guest_mesh(guest: Any) -> Mesh:
@@ -152,9 +188,15 @@ class JoinSolver:
     ``solve(targets, start=previous_result)`` also starts from the previous
     result, which after a small change of the targets needs fewer
     iterations. Along a path of such re-solves (a slider: each solved from
-    the result before) the solver keeps the last ``PATH_LENGTH + 1``
-    results of the path, copies of the guest positions, and predicts the
-    next start from their moves (:meth:`warm_start`); an option change that
+    the result before) the solver predicts the next start from the path's
+    moves (:meth:`warm_start`) and starts the iteration with the
+    quasi-Newton pairs of the step before (the curvature it measured near
+    the minimum). It keeps its last ``KEPT_RESULTS`` (4) converged results,
+    copies of the guest positions, each with the result of the path before
+    it (so a solve in between, e.g. a cold one, does not cut a path), and
+    the quasi-Newton pairs of the newest ``PAIRS_KEPT`` (2) results on a
+    path (2 × (acceleration + 1) × 3n' floats each, kept up to
+    ``PAIRS_MAX_BYTES``, 256 MiB); an option change that
     rebuilds the factorization forgets them, a change of the iteration
     settings does not (it leaves the minima where they are).
 
@@ -341,13 +383,13 @@ class JoinSolver:
         -------
         ndarray, shape (n', 3)
         """
-        return self._warm_start(self._start_positions(start), targets)
+        X = self._start_positions(start)
+        return self._warm_start(X, targets, self._kept_at(X))
 
-    def _warm_start(self, X: np.ndarray, targets: np.ndarray) -> np.ndarray:
-        """:meth:`warm_start` from checked positions ``X`` (n', 3)."""
+    def _warm_start(self, X: np.ndarray, targets: np.ndarray, kept: _Kept | None) -> np.ndarray:
+        """:meth:`warm_start` from checked positions ``X`` (n', 3), kept as ``kept`` (or not)."""
         seam = self.corr.seam
-        path = self._path_to(X)
-        X = path_prediction(X, path[-1 - PATH_LENGTH : -1], seam, targets)
+        X = path_prediction(X, [] if kept is None else list(kept.earlier), seam, targets)
         X = rigid_start(X, seam, targets)
         return X + self.solver.extend(targets - X[seam])
 
@@ -370,31 +412,31 @@ class JoinSolver:
     # -- the path of re-solves (what warm_start predicts from) -----------------------------
 
     def _forget_path(self) -> None:
-        # _path: converged results, oldest first, each solved from the one before;
-        # _origin: the latest converged solve from the initial guess (a path's first)
-        self._path: list[np.ndarray] = []
-        self._origin: np.ndarray | None = None
+        # the latest converged results, oldest first (at most KEPT_RESULTS)
+        self._kept: list[_Kept] = []
 
-    def _path_to(self, X: np.ndarray) -> list[np.ndarray]:
-        """The kept results of the path that ends at positions ``X``, oldest first ([] if none)."""
-        if self._path and np.array_equal(X, self._path[-1]):
-            return self._path
-        if self._origin is not None and np.array_equal(X, self._origin):
-            return [self._origin]
-        return []
+    def _kept_at(self, X: np.ndarray) -> _Kept | None:
+        """The kept result at positions ``X`` (n', 3), the latest if several; ``None``."""
+        for kept in reversed(self._kept):
+            if np.array_equal(X, kept.X):
+                return kept
+        return None
 
-    def _extend_path(self, start: np.ndarray | None, run: Any, X: np.ndarray) -> None:
-        """Keep the result ``X`` of a solve from ``start`` (``None``: the initial guess)."""
+    def _keep(self, before: _Kept | None, run: Any, X: np.ndarray) -> None:
+        """Keep the result ``X`` of a solve from the kept result ``before`` (``None``: from
+        the initial guess or from positions not kept)."""
         if not run.converged:
-            # not a minimum: nothing to predict from
-            if start is not None:
-                self._path = []
-            return
-        X = np.array(X, dtype=np.float64)
-        if start is None:
-            self._origin = X
-        else:
-            self._path = (self._path_to(start) + [X])[-1 - PATH_LENGTH :]
+            return  # not a minimum: nothing to predict from
+        earlier = () if before is None else (*before.earlier, before.X)[-PATH_LENGTH:]
+        memory = run.memory if earlier else None
+        if memory is not None and memory.S.nbytes + memory.Y.nbytes > PAIRS_MAX_BYTES:
+            memory = None
+        kept = [*self._kept, _Kept(np.array(X, dtype=np.float64), earlier, memory)]
+        # the pairs are large (2 (acceleration + 1) 3n' floats): the newest PAIRS_KEPT only
+        holding = [i for i, k in enumerate(kept) if k.memory is not None][:-PAIRS_KEPT]
+        for i in holding:
+            kept[i] = replace(kept[i], memory=None)
+        self._kept = kept[-KEPT_RESULTS:]
 
     def solve(
         self,
@@ -418,8 +460,10 @@ class JoinSolver:
             of the targets) instead of :meth:`initial_guess`; the seam is
             moved onto the targets rigidly and the rest of the move extended
             smoothly, after a prediction from the earlier results when the
-            start ends a path of re-solves (:meth:`warm_start`). A start at
-            the minimum stops after one or two iterations.
+            start ends a path of re-solves (:meth:`warm_start`; the
+            iteration then also starts with the quasi-Newton pairs of the
+            step before). A start at the minimum stops after one or two
+            iterations.
         progress : callable, optional
             Called with a :class:`SolveProgress` after every iteration (for
             a progress display of long solves; it should return quickly).
@@ -457,11 +501,13 @@ class JoinSolver:
                 "seam vertex)"
             )
         t0 = time.perf_counter()
+        kept = None
         if start is None:
             X0 = self.initial_guess(bc)
         else:
             start = self._start_positions(start)
-            X0 = self._warm_start(start, bc)
+            kept = self._kept_at(start)
+            X0 = self._warm_start(start, bc, kept)
         t1 = time.perf_counter()
 
         def report(iteration: int, energy: float) -> None:
@@ -479,6 +525,7 @@ class JoinSolver:
             acceleration=opt.acceleration,
             callback=None if progress is None else report,
             model=model,
+            memory=None if kept is None else kept.memory,
         )
         t2 = time.perf_counter()
         self.last_run, self.last_model = run, model
@@ -497,7 +544,7 @@ class JoinSolver:
             built=self.built,
             rest=self._rest,
         )
-        self._extend_path(start, run, result.guest.V)
+        self._keep(kept, run, result.guest.V)
         t3 = time.perf_counter()
         timings = dict(self.timings)
         timings.update(

@@ -11,6 +11,7 @@ the weld and its self-intersections (:func:`igljoin.measure.weld_metrics`).
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -33,6 +34,30 @@ __all__ = ["join_result", "RestMeasures"]
 
 def _dihedral_summary(angles: np.ndarray) -> dict:
     return {**metrics.summary(angles), "rings": metrics.HOST_DIHEDRAL_RINGS}
+
+
+def _fixed_reports(inputs: list[CreaseMeasure], removed: np.ndarray, dihedral: np.ndarray) -> dict:
+    """The reports of a join that no solve changes, for one seam or all.
+
+    Parameters
+    ----------
+    inputs : list of CreaseMeasure
+        The inputs' band crease, one per seam.
+    removed : ndarray, shape (r,)
+        The crease the smooth-join terms remove (degrees).
+    dihedral : ndarray, shape (d,)
+        The host's dihedral angles near the curves (degrees).
+
+    Returns
+    -------
+    dict
+        ``input_crease_deg``, ``crease_removed_deg``, ``host_dihedral_deg``.
+    """
+    return {
+        "input_crease_deg": crease.report(inputs),
+        "crease_removed_deg": metrics.summary(removed),
+        "host_dihedral_deg": _dihedral_summary(dihedral),
+    }
 
 
 class RestMeasures:
@@ -80,6 +105,24 @@ class RestMeasures:
             key,
             lambda: crease.input_crease(seam.with_guest(self.corr.V), band, host_fit, rest_fit),
         )
+
+    def reports(self, key: tuple, make: Callable[[], dict]) -> dict:
+        """Reports of what a solve does not change (the inputs' crease, the host's angles, the
+        crease the terms remove), made once per ``key``; a copy of each, so a result's
+        metrics are its own.
+
+        Parameters
+        ----------
+        key : tuple
+            Names the reports within the set-up (e.g. the seam's number).
+        make : callable
+            Returns a dict of flat dicts (name to summary).
+
+        Returns
+        -------
+        dict
+        """
+        return {name: dict(value) for name, value in self._kept(key, make).items()}
 
     @property
     def areas(self) -> np.ndarray:
@@ -185,6 +228,15 @@ def join_result(
         host_fit, rest_fit = host_values.band_fit(hc, band), rest.fit(at_host, hc.closed, band)
         measured = crease.seam_crease(geometry, band, c.V, host_fit, rest_fit)
         inputs = rest.input_crease(geometry, band, host_fit, rest_fit)
+        fixed = rest.reports(
+            ("seam reports", i),
+            partial(
+                _fixed_reports,
+                [inputs],
+                removed[i] if removed else np.zeros(0),
+                host_values.dihedral(hc.indices),
+            ),
+        )
         onering = metrics.crease_angles(geometry, host_values.inward(hc))
         measured_all.append(measured)
         inputs_all.append(inputs)
@@ -222,13 +274,13 @@ def join_result(
                 "seam_gap": gap,
                 "crease_deg": crease.report([measured]),
                 "crease_onering_deg": metrics.summary(onering),
-                "input_crease_deg": crease.report([inputs]),
+                "input_crease_deg": fixed["input_crease_deg"],
                 "join_angle_deg": angle,
                 "join_angle_error_deg": (
                     crease.report([off_angle_all[-1]]) if off_angle_all else None
                 ),
-                "crease_removed_deg": metrics.summary(removed[i] if removed else np.zeros(0)),
-                "host_dihedral_deg": _dihedral_summary(host_values.dihedral(hc.indices)),
+                "crease_removed_deg": fixed["crease_removed_deg"],
+                "host_dihedral_deg": fixed["host_dihedral_deg"],
             }
         )
         start += s
@@ -244,20 +296,29 @@ def join_result(
         "seams": len(seams),
     }
     total_ratio = float(areas.sum() / rest.areas.sum())
+    fixed = rest.reports(
+        ("reports",),
+        partial(
+            _fixed_reports,
+            inputs_all,
+            np.concatenate(removed) if removed else np.zeros(0),
+            host_values.dihedral(host_curve),
+        ),
+    )
     m = {
         "seam_gap": combined_gap(gaps, [len(sm.seam) for sm in seams]),
         "crease_deg": crease.report(measured_all),
         "crease_onering_deg": metrics.summary(np.concatenate(onering_all)),
-        "input_crease_deg": crease.report(inputs_all),
+        "input_crease_deg": fixed["input_crease_deg"],
         "join_angle_error_deg": crease.report(off_angle_all) if off_angle_all else None,
-        "host_dihedral_deg": _dihedral_summary(host_values.dihedral(host_curve)),
+        "host_dihedral_deg": fixed["host_dihedral_deg"],
         "area_ratio": {**metrics.summary(ratio), "total": total_ratio},
         "area_change": metrics.summary(np.abs(ratio - 1.0)),
         "strain": metrics.summary(strain),
         "vertex_strain": metrics.summary(vertex_strain),
         "displacement_nonrigid": metrics.summary(displacement),
         "folded_pairs": len(metrics.folded_pairs(c.V, X, c.F, rest=rest.folds)),
-        "crease_removed_deg": metrics.summary(np.concatenate(removed) if removed else np.zeros(0)),
+        "crease_removed_deg": fixed["crease_removed_deg"],
         "seams": per_seam,
     }
     result = JoinResult(

@@ -37,6 +37,7 @@ convergence by about 40 % (docs/benchmarks.md), to the same minimum.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -48,7 +49,7 @@ from .errors import SolveError
 from .linsolve import AugmentedQuadratic, FixedQuadratic, available_backends
 from .terms import LocalState, SmoothJoinTerm, Term
 
-__all__ = ["LocalGlobalSolver", "IterationResult", "AUGMENT_FROM_COUPLINGS"]
+__all__ = ["LocalGlobalSolver", "IterationResult", "QuasiNewtonMemory", "AUGMENT_FROM_COUPLINGS"]
 
 #: Vertex pairs coupled by the band smooth-join rows (:func:`igljoin.terms.band_couplings`,
 #: the non-zeros of their block ``Kᵀ W K``) from which the solver keeps that block out
@@ -97,6 +98,10 @@ class IterationResult:
         decrease the energy enough), ``restarts`` (quasi-Newton memory
         dropped) and ``model_builds`` (builds and rebuilds of a ``model``
         during the run).
+    memory : QuasiNewtonMemory or None
+        The quasi-Newton pairs held at the end (``None`` for the plain
+        iteration): a later run of the same solver may start from them
+        (``run(memory=...)``).
     """
 
     X: np.ndarray
@@ -106,6 +111,7 @@ class IterationResult:
     reason: str = ""
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
+    memory: QuasiNewtonMemory | None = None
 
 
 class LocalGlobalSolver:
@@ -154,6 +160,7 @@ class LocalGlobalSolver:
         self.linear_solver = linear_solver
         self.wide = _wide_term(terms, linear_solver)
         self._Q = self._P = None
+        self._stiffness_bound: float | None = None
         if self.wide is None:
             parts = [term.quadratic() for term in terms]
             self._Q = sp.csr_matrix(sum(parts, sp.csr_matrix((n, n))))
@@ -248,6 +255,23 @@ class LocalGlobalSolver:
         out = self.factor.solve(np.ones((self.n, 1)), np.zeros((len(self.fixed), 1)))
         return out[:, 0]
 
+    def stiffness_bound(self) -> float | None:
+        """An upper bound of ``Q``'s largest eigenvalue (its largest absolute row sum), made once.
+
+        ``None`` where ``Q`` is not formed (the band block kept apart).
+        """
+        if self.wide is not None:
+            return None
+        if self._stiffness_bound is None:
+            # read from the stored entries (duplicates counted apart: a larger bound, still
+            # one); scipy's abs() would sort Q's indices in place, and with them the
+            # order its products sum in
+            Q = self.Q
+            rows = np.repeat(np.arange(Q.shape[0]), np.diff(Q.indptr))
+            sums = np.bincount(rows, weights=np.abs(Q.data), minlength=Q.shape[0])
+            self._stiffness_bound = float(sums.max(initial=0.0))
+        return self._stiffness_bound
+
     def energy_floor(self, X: np.ndarray, tolerance: float) -> float:
         """Energy below which ``X``'s neighbourhood counts as a zero-energy minimum.
 
@@ -300,6 +324,7 @@ class LocalGlobalSolver:
         acceleration: int = 5,
         callback=None,
         model=None,
+        memory: QuasiNewtonMemory | None = None,
     ) -> IterationResult:
         """Iterate from ``X0`` (shape (n, 3)) until the iterates settle.
 
@@ -346,6 +371,12 @@ class LocalGlobalSolver:
             ``factorizations`` (its builds so far: those of this run are
             ``stats["model_builds"]``). The plain
             fallback step stays ``Q``'s.
+        memory : QuasiNewtonMemory, optional
+            Quasi-Newton pairs to start with (``IterationResult.memory`` of an
+            earlier run of this solver, e.g. the one whose result ``X0`` was
+            predicted from): the first step then already knows the curvature
+            they measured. Copied, not changed; ignored unless it holds pairs
+            of this run's ``acceleration`` and size.
 
         Returns
         -------
@@ -402,9 +433,13 @@ class LocalGlobalSolver:
         # g: half the gradient of E on the free rows
         state, e, g = local(x, None)
         energy = [e]
-        memory = _Memory(acceleration, g.shape)
+        if memory is not None and memory.fits(acceleration, g.shape):
+            memory = memory.copy()
+        else:
+            memory = QuasiNewtonMemory(acceleration, g.shape)
         step_tol = np.sqrt(tolerance) * scale
-        floor = self.energy_floor(X, tolerance)
+        # the floor, made only when it decides (see _FloorTest)
+        floor = _FloorTest(self, X, tolerance)
         for it in range(1, max_iterations + 1):
             hint = state.rotations
             if model is not None and acceleration > 0:
@@ -454,8 +489,9 @@ class LocalGlobalSolver:
             if callback is not None:
                 callback(it, e)
             window = energy[max(0, len(energy) - 1 - _WINDOW)] - e
-            settled = (it >= 2 and abs(window) <= tolerance * max(e, 1e-300)) or e <= floor
-            if settled and move <= step_tol:
+            if move <= step_tol and (
+                (it >= 2 and abs(window) <= tolerance * max(e, 1e-300)) or floor.reached(e)
+            ):
                 result.converged, result.reason = True, "tolerance"
                 break
             if time_limit is not None and time.perf_counter() - start > time_limit:
@@ -472,6 +508,7 @@ class LocalGlobalSolver:
         if model is not None:
             stats["model_builds"] = model.factorizations - builds_before
         result.stats = stats
+        result.memory = memory if acceleration > 0 else None
         return result
 
 
@@ -495,7 +532,35 @@ def _wide_term(terms: list[Term], linear_solver: str) -> Term | None:
     return wide[0]
 
 
-class _Memory:
+class _FloorTest:
+    """``e <= solver.energy_floor(X, tolerance)``, with the floor made only when it may hold.
+
+    The floor is ``tolerance² tr(X̄ᵀ Q X̄)``, at most ``tolerance² λ ‖X̄‖²`` with
+    ``λ`` :meth:`LocalGlobalSolver.stiffness_bound`; an energy above that bound
+    (every real join's, by orders) is above the floor without making it (a
+    sparse product with ``Q``), and the answer is the same.
+    """
+
+    def __init__(self, solver: LocalGlobalSolver, X: np.ndarray, tolerance: float):
+        self.solver, self.X, self.tolerance = solver, X, tolerance
+        self.floor: float | None = None
+        self.bound = math.inf
+        stiffness = solver.stiffness_bound()
+        if stiffness is not None:
+            Xc = X - np.mean(X, axis=0)
+            # 1e-6: far above the rounding of either sum, so the bound stays a bound
+            self.bound = (1.0 + 1e-6) * tolerance * tolerance * stiffness * float(np.vdot(Xc, Xc))
+
+    def reached(self, e: float) -> bool:
+        """The energy ``e`` is at or below the floor."""
+        if e > self.bound:
+            return False
+        if self.floor is None:
+            self.floor = self.solver.energy_floor(self.X, self.tolerance)
+        return e <= self.floor
+
+
+class QuasiNewtonMemory:
     """The last ``m`` quasi-Newton pairs ``(s, y)`` in ring buffers.
 
     Parameters
@@ -522,6 +587,19 @@ class _Memory:
         self.alpha = np.empty(rows)
         self.order: list[int] = []  # slots, oldest first
         self.unused = list(range(rows))
+
+    def fits(self, m: int, shape: tuple) -> bool:
+        """It holds pairs for a run with ``m`` pairs and iterates of ``shape``."""
+        return self.m == m and self.S.shape[1] == int(np.prod(shape))
+
+    def copy(self) -> QuasiNewtonMemory:
+        """An independent copy (its buffers copied)."""
+        out = QuasiNewtonMemory(0, (0,))
+        out.m = self.m
+        out.S, out.Y = self.S.copy(), self.Y.copy()
+        out.rho, out.alpha = self.rho.copy(), self.alpha.copy()
+        out.order, out.unused = list(self.order), list(self.unused)
+        return out
 
     @property
     def size(self) -> int:

@@ -11,6 +11,7 @@ No tolerance is used anywhere: every comparison is exact.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import importlib
 
@@ -787,7 +788,15 @@ def test_a_re_solve_reuses_the_kept_values_and_equals_a_fresh_solver(key):
     first = solver.solve()
     T = _resolve_targets(first.seam_targets, 1.0)
     kept = dict(solver._rest.made)
-    assert {k[0] for k in kept} == {"fit", "input", "areas", "lengths", "folds"}
+    assert {k[0] for k in kept} == {
+        "fit",
+        "input",
+        "areas",
+        "lengths",
+        "folds",
+        "seam reports",
+        "reports",
+    }
     basis, bump = solver._bulge_basis, solver._bump
     if key[0] == "partial_patch":  # a disk guest longer than its curve: lifted at the start
         assert basis is not None and bump is not None
@@ -801,6 +810,20 @@ def test_a_re_solve_reuses_the_kept_values_and_equals_a_fresh_solver(key):
         assert np.array_equal(got.guest.V, want.guest.V)
         assert got.metrics == {**want.metrics, "time_seconds": got.metrics["time_seconds"]}
         assert [w.code for w in got.warnings] == [w.code for w in want.warnings]
+
+
+def test_the_kept_reports_are_each_results_own():
+    """The reports no solve changes are made once, but a result that changes its own
+    metrics changes no other result's."""
+    s = paper_sample("partial_patch", "equal", resolution=0.5)
+    solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    first = solver.solve()
+    want = copy.deepcopy(first.metrics)
+    for m in (first.metrics, first.metrics["seams"][0]):
+        for name in ("input_crease_deg", "crease_removed_deg", "host_dihedral_deg"):
+            m[name]["max"] = -1.0
+    again = solver.solve()
+    assert again.metrics == {**want, "time_seconds": again.metrics["time_seconds"]}
 
 
 @pytest.mark.parametrize(

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -502,6 +504,119 @@ def test_re_solves_along_a_path_start_near_the_next_minimum(patch):
     assert np.array_equal(solver.warm_start(warm, T5), plain_start(warm, T5, stretch_weight=2.0))
 
 
+def test_a_path_is_not_cut_by_solves_that_are_not_on_it(patch):
+    """A cold solve between the steps of a path (as a comparison does) leaves the path."""
+    solver = _solver(patch)
+    first = solver.solve()
+    T0 = first.seam_targets
+    solver.solve(_turned(T0, 1))  # cold: a result of its own, not on the path
+    step = solver.solve(_turned(T0, 1), start=first)
+    solver.solve(_turned(T0, 2))
+    T = _turned(T0, 2)
+    fresh = _solver(patch)  # a solver that knows no path: rigid start and extension only
+    fresh.solve()
+    predicted, plain = solver.warm_start(step, T), fresh.warm_start(step, T)
+    tight = fresh.solve(T, energy_tolerance=1e-12, max_iterations=5000)
+    assert tight.converged
+    e, e_min = solver.solver.energy, tight.energy[-1]
+    # as in the test above: the prediction leaves 2e-4 to 2e-3 of the plain start's
+    # excess energy, so 1e-2 fails a start that predicts nothing
+    assert e(predicted) - e_min < 1e-2 * (e(plain) - e_min)
+
+
+def test_a_re_solve_along_a_path_starts_with_the_quasi_newton_pairs_before(patch, monkeypatch):
+    """The second step of a path starts with the first step's pairs; they are copied."""
+    from igljoin.solve import LocalGlobalSolver
+
+    given = []
+    run = LocalGlobalSolver.run
+
+    def spy(self, X0, bc, **kw):
+        memory = kw.get("memory")
+        given.append(None if memory is None else (memory.size, memory.S.copy()))
+        out = run(self, X0, bc, **kw)
+        if memory is not None:  # the run copied the pairs and left them as they were
+            assert np.array_equal(memory.S, given[-1][1])
+        return out
+
+    monkeypatch.setattr(LocalGlobalSolver, "run", spy)
+    solver = _solver(patch)
+    first = solver.solve()
+    T0 = first.seam_targets
+    step1 = solver.solve(_turned(T0, 1), start=first)  # from a cold result: no path yet
+    pairs = solver.last_run.memory
+    step2 = solver.solve(_turned(T0, 2), start=step1)
+    step3 = solver.solve(_turned(T0, 3), start=step2)
+    again = solver.solve(_turned(T0, 3), start=step2)
+    assert given[0] is None and given[1] is None
+    assert given[2][0] == pairs.size > 0
+    assert np.array_equal(given[2][1], pairs.S)
+    # the newest step again from the result before it: the same pairs (copied, not used
+    # up), the same result, to the bit
+    assert given[3] is not None and step3.converged
+    assert given[4][0] == given[3][0] and np.array_equal(given[4][1], given[3][1])
+    assert np.array_equal(step3.guest.V, again.guest.V)
+    # the plain iteration holds no pairs and keeps none
+    plain = solver.solve(_turned(T0, 3), start=step2, acceleration=0, max_iterations=3000)
+    assert plain.converged and solver.last_run.memory is None
+
+
+def test_pairs_larger_than_the_limit_are_not_kept(patch, monkeypatch):
+    """Above ``PAIRS_MAX_BYTES`` a path's re-solves start without pairs (and hold none)."""
+    join_module = importlib.import_module("igljoin.join")  # igljoin.join is the function
+    solver = _solver(patch)
+    first = solver.solve()
+    T0 = first.seam_targets
+    step1 = solver.solve(_turned(T0, 1), start=first)
+    size = solver.last_run.memory.S.nbytes + solver.last_run.memory.Y.nbytes
+    monkeypatch.setattr(join_module, "PAIRS_MAX_BYTES", size - 1)
+    step2 = solver.solve(_turned(T0, 2), start=step1)
+    assert step2.converged and np.array_equal(solver._kept[-1].X, step2.guest.V)
+    assert solver._kept[-1].memory is None
+    monkeypatch.setattr(join_module, "PAIRS_MAX_BYTES", size)
+    solver.solve(_turned(T0, 3), start=step2)
+    assert solver._kept[-1].memory is not None
+
+
+def test_a_run_started_with_pairs_reaches_the_same_minimum(patch):
+    """``run(memory=...)``: other steps, the same minimum; pairs of another size are ignored."""
+    solver = _solver(patch)
+    first = solver.solve()
+    ls, opt = solver.solver, solver.options
+    T = _turned(first.seam_targets, 1)
+    X0 = solver.warm_start(first, T)
+    kw = dict(tolerance=opt.energy_tolerance, scale=solver.guest_mean_edge, acceleration=10)
+    pairs = solver.last_run.memory
+    plain = ls.run(X0, T, **kw)
+    carried = ls.run(X0, T, memory=pairs, **kw)
+    other = ls.run(X0, T, memory=pairs, **{**kw, "acceleration": 5})
+    assert plain.converged and carried.converged
+    assert carried.energy[1] != plain.energy[1]  # the first step used the pairs
+    # both stop within their tolerance (1e-7 relative over five iterations): 1e-6 apart
+    assert abs(carried.energy[-1] - plain.energy[-1]) <= 1e-6 * plain.energy[-1]
+    # pairs of 10 do not fit a run of 5: it starts without any, as a run given none
+    assert other.energy == ls.run(X0, T, **{**kw, "acceleration": 5}).energy
+
+
+def test_the_floor_is_made_only_where_it_can_decide(tube):
+    """The floor test answers as ``e <= energy_floor`` and makes the floor only near it."""
+    from igljoin.solve import _FloorTest
+
+    solver = _solver(tube)
+    ls, X = solver.solver, solver.initial_guess()
+    tol = solver.options.energy_tolerance
+    floor = ls.energy_floor(X, tol)
+    test = _FloorTest(ls, X, tol)
+    assert floor <= test.bound < np.inf
+    for e in (0.0, 0.5 * floor, floor, np.nextafter(floor, np.inf), 2.0 * floor, 10 * test.bound):
+        assert _FloorTest(ls, X, tol).reached(e) == (e <= floor), e
+    # an energy above the bound (every real join's) never makes the floor
+    test.reached(2.0 * test.bound)
+    assert test.floor is None
+    test.reached(floor)
+    assert test.floor == floor
+
+
 # -- reuse of the factorization across solves ----------------------------------------------
 
 
@@ -551,11 +666,11 @@ def _two_loop(g, pairs, scale):
 
 
 def test_quasi_newton_memory_keeps_the_last_pairs_of_positive_curvature():
-    from igljoin.solve import _Memory
+    from igljoin.solve import QuasiNewtonMemory
 
     rng = np.random.default_rng(0)
     shape = (1001, 3)  # an odd size: the kernels' unrolled loops have a remainder
-    memory = _Memory(3, shape)
+    memory = QuasiNewtonMemory(3, shape)
     kept = []
     for k in range(6):
         x, g = rng.normal(size=shape), rng.normal(size=shape)
