@@ -28,7 +28,7 @@ from .mesh import Mesh, as_mesh
 from .options import JoinOptions
 from .result import JoinResult
 from .seams import SeamPair
-from .solve import LocalGlobalSolver
+from .solve import LocalGlobalSolver, QuasiNewtonMemory
 from .start import bulge, bulge_basis, path_prediction, rigid_start
 from .stiffness import needs_guest, resolve_stiffness
 from .terms import unique_edges
@@ -89,7 +89,7 @@ class _Kept:
 
     X: np.ndarray
     earlier: tuple
-    memory: Any
+    memory: QuasiNewtonMemory | None
 
 
 def _guest_mesh(guest: Any) -> Mesh:
@@ -429,8 +429,6 @@ class JoinSolver:
             return  # not a minimum: nothing to predict from
         earlier = () if before is None else (*before.earlier, before.X)[-PATH_LENGTH:]
         memory = run.memory if earlier else None
-        if memory is not None and memory.S.nbytes + memory.Y.nbytes > PAIRS_MAX_BYTES:
-            memory = None
         kept = [*self._kept, _Kept(np.array(X, dtype=np.float64), earlier, memory)]
         # the pairs are large (2 (acceleration + 1) 3n' floats): the newest PAIRS_KEPT only
         holding = [i for i, k in enumerate(kept) if k.memory is not None][:-PAIRS_KEPT]
@@ -528,6 +526,8 @@ class JoinSolver:
             memory=None if kept is None else kept.memory,
         )
         t2 = time.perf_counter()
+        if run.memory is not None and run.memory.S.nbytes + run.memory.Y.nbytes > PAIRS_MAX_BYTES:
+            run.memory = None  # neither kept nor held by last_run past the run
         self.last_run, self.last_model = run, model
         result = join_result(
             run,

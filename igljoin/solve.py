@@ -37,6 +37,7 @@ convergence by about 40 % (docs/benchmarks.md), to the same minimum.
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from dataclasses import dataclass, field
@@ -594,12 +595,7 @@ class QuasiNewtonMemory:
 
     def copy(self) -> QuasiNewtonMemory:
         """An independent copy (its buffers copied)."""
-        out = QuasiNewtonMemory(0, (0,))
-        out.m = self.m
-        out.S, out.Y = self.S.copy(), self.Y.copy()
-        out.rho, out.alpha = self.rho.copy(), self.alpha.copy()
-        out.order, out.unused = list(self.order), list(self.unused)
-        return out
+        return copy.deepcopy(self)
 
     @property
     def size(self) -> int:
