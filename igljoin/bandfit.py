@@ -344,13 +344,18 @@ def band_fit(
     hits = np.empty(total, dtype=np.int32 if n < 2**31 else np.int64)
     n0 = VN[curve]
     pulled = np.zeros((k, 3))
+    # a fit of one chunk keeps its band rows for the fit itself (pass 2 would make them
+    # again); several chunks make each again, so that only one chunk's are held at a time
+    kept = None
     for sl in chunks:
         found = tree.query_ball_point(A[sl], band)
         size = int(offsets[sl.stop] - offsets[sl.start])
         got = np.fromiter(chain.from_iterable(found), dtype=np.int64, count=size)
         hits[offsets[sl.start] : offsets[sl.stop]] = near[got]
-        _, valid, VNb = _band_rows(hits, offsets, counts, curve, VN, sl, M)
+        idx, valid, VNb = _band_rows(hits, offsets, counts, curve, VN, sl, M)
         pulled[sl] = np.einsum("km,kmj->kj", np.where(valid, 1.0, 0.0), VNb)
+        if len(chunks) == 1:
+            kept = idx, valid
     n0 = unit(pulled + n0)
     del pulled
     g0 = unit(np.cross(n0, T))
@@ -361,7 +366,9 @@ def band_fit(
     along = min(band, along_curve_reach(P, closed, n0, band))
     parts, used, normal, inward, slope_error = [], [], [], [], []
     for sl in chunks:
-        idx, valid, _ = _band_rows(hits, offsets, counts, curve, VN, sl, M)
+        idx, valid = (
+            kept if kept is not None else _band_rows(hits, offsets, counts, curve, VN, sl, M)[:2]
+        )
         D = V[idx] - A[sl, None, :]
         g = g0[sl]
         unknown = side[sl] == 0
@@ -520,7 +527,20 @@ def _fit_rows(X: np.ndarray, w: np.ndarray) -> np.ndarray:
     XtW, H = _normal_equations(X, w)
     # a small ridge keeps a thin or empty band solvable; it only matters there
     ridge = 1e-8 * np.maximum(np.trace(H, axis1=1, axis2=2), 1e-12)[:, None, None]
-    return np.linalg.solve(H + ridge * np.eye(H.shape[1]), XtW)
+    A = H + ridge * np.eye(H.shape[1])
+    # a band vertex of weight 0 (outside the ellipsoid, another sheet, the padding) has
+    # a zero column in XᵀW and a zero column in Z: only the others are solved for, each
+    # row's in their order, the rows padded to the widest with zero columns (at least
+    # two right-hand sides, as the full width has; one would take LAPACK's other path)
+    present = w > 0.0
+    k, p, M = XtW.shape
+    width = min(M, max(2, int(present.sum(axis=1).max()) if k else 0))
+    if width >= M:
+        return np.linalg.solve(A, XtW)
+    order = np.argsort(~present, axis=1, kind="stable")[:, :width, None].swapaxes(1, 2)
+    Z = np.zeros_like(XtW)
+    np.put_along_axis(Z, order, np.linalg.solve(A, np.take_along_axis(XtW, order, axis=2)), 2)
+    return Z
 
 
 @nb.njit(cache=True)

@@ -70,7 +70,7 @@ def _whole_curve_fit(V, F, curve, closed, band, *, curve_points=None):
     w = np.where(valid, (1.0 - r2) ** 2 + 1e-3, 0.0)
     used = valid.sum(axis=1)
     X = bandfit._columns(u, v, used)
-    Z = bandfit._fit_rows(X, w)
+    Z = _padded_fit_rows(X, w)
     beta = Z[:, 1, :] / band
     rows = np.repeat(np.arange(k), M)
     data = np.concatenate([beta.reshape(-1), -beta.sum(axis=1)])
@@ -91,6 +91,14 @@ def _whole_curve_fit(V, F, curve, closed, band, *, curve_points=None):
         counts=used,
         slope_error=bandfit._slope_error(Z, X, D, normal, band, used),
     )
+
+
+def _padded_fit_rows(X, w):
+    """The fit's rows solved over every band vertex, the padding's included (the solve the
+    fit made before it left out the band vertices of weight 0)."""
+    XtW, H = bandfit._normal_equations(X, w)
+    ridge = 1e-8 * np.maximum(np.trace(H, axis1=1, axis2=2), 1e-12)[:, None, None]
+    return np.linalg.solve(H + ridge * np.eye(H.shape[1]), XtW)
 
 
 def _assert_same(a, b):
@@ -245,3 +253,21 @@ def test_the_fits_memory_does_not_grow_with_curve_times_band(fit_cases, monkeypa
     # 5x leaves room for allocator and library changes, while a fit whose work arrays
     # grew with the whole curve again would come out near 1x
     assert whole > 5 * chunked
+
+
+@pytest.mark.parametrize("M", [1, 2, 3, 40])
+def test_the_rows_solved_without_the_weightless_band_vertices_are_the_padded_rows(M):
+    # rows with no, one and a few band vertices weighted (up to all but one), anywhere in
+    # the row: the fit solves for the weighted columns only (two at least), and each row
+    # of Z must be the one the solve over all M columns gives, zeros elsewhere
+    rng = np.random.default_rng(M)
+    k = 60
+    u, v = rng.uniform(-1.0, 1.0, (2, k, M))
+    present = np.zeros((k, M), dtype=bool)
+    for r in range(k):
+        present[r, rng.permutation(M)[: r % M]] = True
+    w = np.where(present, rng.uniform(1e-3, 1.0, (k, M)), 0.0)
+    X = bandfit._columns(u, v, present.sum(axis=1))
+    Z = bandfit._fit_rows(X, w)
+    _assert_same(Z, _padded_fit_rows(X, w))
+    assert (Z[np.broadcast_to(~present[:, None, :], Z.shape)] == 0).all()
