@@ -339,7 +339,15 @@ def band_fit(
     from scipy.spatial import cKDTree  # here: scipy.spatial costs start-up time
 
     tree = cKDTree(V[near])
-    counts = np.asarray(tree.query_ball_point(A, band, return_length=True), dtype=np.int64)
+    # a curve whose vertices could not hold more than a chunk's entries however wide
+    # the band (each has at most every near vertex) is queried once, its lists counted;
+    # a longer one is counted first and queried a chunk at a time
+    whole = k * len(near) <= FIT_CHUNK_ENTRIES
+    if whole:
+        found = tree.query_ball_point(A, band, return_sorted=False)
+        counts = np.fromiter(map(len, found), dtype=np.int64, count=k)
+    else:
+        counts = np.asarray(tree.query_ball_point(A, band, return_length=True), dtype=np.int64)
     total = int(counts.sum())
     widest = int(counts.max()) if k else 0
     _check_size(band, k, total, widest)
@@ -355,10 +363,10 @@ def band_fit(
     # again); several chunks make each again, so that only one chunk's are held at a time
     kept = None
     for sl in chunks:
-        found = tree.query_ball_point(A[sl], band)
+        lists = found[sl] if whole else tree.query_ball_point(A[sl], band, return_sorted=False)
         size = int(offsets[sl.stop] - offsets[sl.start])
-        got = np.fromiter(chain.from_iterable(found), dtype=np.int64, count=size)
-        hits[offsets[sl.start] : offsets[sl.stop]] = near[got]
+        got = np.fromiter(chain.from_iterable(lists), dtype=np.int64, count=size)
+        hits[offsets[sl.start] : offsets[sl.stop]] = near[_sorted_in_rows(got, counts[sl])]
         idx, valid, VNb = _band_rows(hits, offsets, counts, curve, VN, sl, M)
         pulled[sl] = np.einsum("km,kmj->kj", np.where(valid, 1.0, 0.0), VNb)
         if len(chunks) == 1:
@@ -421,6 +429,21 @@ def _check_size(band: float, k: int, total: int, widest: int) -> None:
         f"than the band; give smooth_band={narrower:.3g} or less, or raise "
         "igljoin.bandfit.MAX_FIT_ENTRIES"
     )
+
+
+def _sorted_in_rows(got: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """``got`` (total,), rows of ``counts`` (r,) entries one after another, each row sorted.
+
+    The tree's lists of the band vertices, in the order its sorted query gives them
+    (one sort of row-major keys instead of one per list).
+    """
+    if not got.size:
+        return got
+    row = np.repeat(np.arange(counts.size, dtype=np.int64), counts)
+    width = int(got.max()) + 1
+    key = row * width + got
+    key.sort()
+    return key - row * width
 
 
 def _rows_per_chunk(M: int) -> int:

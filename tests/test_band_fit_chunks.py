@@ -158,6 +158,17 @@ def test_the_chunked_fit_is_the_whole_curve_fit_to_the_bit(fit_cases, rows, monk
         _assert_same_fit(a, b)
 
 
+def test_a_curve_counted_before_its_query_is_fitted_to_the_bit(fit_cases, monkeypatch):
+    # a curve whose rows could exceed a chunk is counted first and queried a chunk at a
+    # time (a short one is queried once): a budget of 0 entries sends every curve that
+    # way, one row per chunk
+    monkeypatch.setattr(bandfit, "FIT_CHUNK_ENTRIES", 0)
+    for _, V, F, curve, closed, band, points in fit_cases:
+        a = bandfit.band_fit(V, F, curve, closed, band, curve_points=points)
+        b = _whole_curve_fit(V, F, curve, closed, band, curve_points=points)
+        _assert_same_fit(a, b)
+
+
 #: Real cuts from the corpus: four scans of different resolution, each kind of cut (a
 #: ball, a plane along edges, a plane splitting triangles, which leaves slivers on the
 #: seam), small and large pieces.
