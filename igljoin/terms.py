@@ -141,7 +141,7 @@ class Term(ABC):
 
     def quadratic(self) -> sp.csr_matrix:
         """The term's constant quadratic form ``Kᵀ W K``, shape (n, n)."""
-        return sp.csr_matrix(self.K.T @ sp.diags(self.weights) @ self.K)
+        return _gram(self.K, self.weights)
 
     def local(self, state: LocalState) -> tuple[float, np.ndarray]:
         """Local step: energy at ``state.X`` and ``Kᵀ W (K X − target)``, shape (n, 3).
@@ -221,6 +221,28 @@ def _edge_vectors(
 def unique_edges(F: np.ndarray) -> np.ndarray:
     """Undirected edges of a triangle mesh, shape (e, 2), each listed once."""
     return np.asarray(igl.edges(F), dtype=np.int64)
+
+
+def _gram(K: sp.spmatrix, weights: np.ndarray) -> sp.csr_matrix:
+    """``Kᵀ diag(weights) K``, shape (n, n), for ``K`` of shape (r, n): the floats and the
+    layout of ``sp.csr_matrix(K.T @ sp.diags(weights) @ K)``, in one product.
+
+    That expression multiplies ``w[r] K[r, i]`` by ``K[r, j]`` and sums over the
+    rows ``r`` in increasing order, through two transposed products and a
+    conversion that sorts each row's columns; here ``Kᵀ``'s entries are scaled
+    by their row's weight and multiplied by ``K`` once (the same products,
+    summed in the same order), and the columns sorted. Later sums read the
+    layout (a sparse product sums a row in its stored order), so it is kept too.
+    A ``K`` with duplicate entries takes the expression itself.
+    """
+    K = sp.csr_matrix(K)
+    if not K.has_canonical_format:
+        return sp.csr_matrix(K.T @ sp.diags(weights) @ K)
+    KtW = sp.csr_matrix(K.T)
+    KtW.data = KtW.data * np.asarray(weights, dtype=np.float64)[KtW.indices]
+    Q = sp.csr_matrix(KtW @ K)
+    Q.sort_indices()
+    return Q
 
 
 def _difference_operator(E: np.ndarray, n: int) -> sp.csr_matrix:

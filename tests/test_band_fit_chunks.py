@@ -70,7 +70,7 @@ def _whole_curve_fit(V, F, curve, closed, band, *, curve_points=None):
     w = np.where(valid, (1.0 - r2) ** 2 + 1e-3, 0.0)
     used = valid.sum(axis=1)
     X = bandfit._columns(u, v, used)
-    Z = bandfit._fit_rows(X, w)
+    Z = _padded_fit_rows(X, w)
     beta = Z[:, 1, :] / band
     rows = np.repeat(np.arange(k), M)
     data = np.concatenate([beta.reshape(-1), -beta.sum(axis=1)])
@@ -91,6 +91,14 @@ def _whole_curve_fit(V, F, curve, closed, band, *, curve_points=None):
         counts=used,
         slope_error=bandfit._slope_error(Z, X, D, normal, band, used),
     )
+
+
+def _padded_fit_rows(X, w):
+    """The fit's rows solved over every band vertex, the padding's included (the solve the
+    fit made before it left out the band vertices of weight 0)."""
+    XtW, H = bandfit._normal_equations(X, w)
+    ridge = 1e-8 * np.maximum(np.trace(H, axis1=1, axis2=2), 1e-12)[:, None, None]
+    return np.linalg.solve(H + ridge * np.eye(H.shape[1]), XtW)
 
 
 def _assert_same(a, b):
@@ -144,6 +152,17 @@ def fit_cases():
 def test_the_chunked_fit_is_the_whole_curve_fit_to_the_bit(fit_cases, rows, monkeypatch):
     if rows is not None:
         monkeypatch.setattr(bandfit, "_rows_per_chunk", lambda M: rows)
+    for _, V, F, curve, closed, band, points in fit_cases:
+        a = bandfit.band_fit(V, F, curve, closed, band, curve_points=points)
+        b = _whole_curve_fit(V, F, curve, closed, band, curve_points=points)
+        _assert_same_fit(a, b)
+
+
+def test_a_curve_counted_before_its_query_is_fitted_to_the_bit(fit_cases, monkeypatch):
+    # a curve whose rows could exceed a chunk is counted first and queried a chunk at a
+    # time (a short one is queried once): a budget of 0 entries sends every curve that
+    # way, one row per chunk
+    monkeypatch.setattr(bandfit, "FIT_CHUNK_ENTRIES", 0)
     for _, V, F, curve, closed, band, points in fit_cases:
         a = bandfit.band_fit(V, F, curve, closed, band, curve_points=points)
         b = _whole_curve_fit(V, F, curve, closed, band, curve_points=points)
@@ -245,3 +264,22 @@ def test_the_fits_memory_does_not_grow_with_curve_times_band(fit_cases, monkeypa
     # 5x leaves room for allocator and library changes, while a fit whose work arrays
     # grew with the whole curve again would come out near 1x
     assert whole > 5 * chunked
+
+
+@pytest.mark.parametrize("M, most", [(1, 0), (2, 1), (3, 2), (40, 20), (40, 39)])
+def test_the_rows_solved_without_the_weightless_band_vertices_are_the_padded_rows(M, most):
+    # rows with no, one and up to ``most`` band vertices weighted, anywhere in the row:
+    # where the weighted are few enough the fit solves for them only (two columns at
+    # least), otherwise over every column; each row of Z must be the one the solve over
+    # all M columns gives, zeros elsewhere
+    rng = np.random.default_rng(M + most)
+    k = 60
+    u, v = rng.uniform(-1.0, 1.0, (2, k, M))
+    present = np.zeros((k, M), dtype=bool)
+    for r in range(k):
+        present[r, rng.permutation(M)[: r % (most + 1)]] = True
+    w = np.where(present, rng.uniform(1e-3, 1.0, (k, M)), 0.0)
+    X = bandfit._columns(u, v, present.sum(axis=1))
+    Z = bandfit._fit_rows(X, w)
+    _assert_same(Z, _padded_fit_rows(X, w))
+    assert (Z[np.broadcast_to(~present[:, None, :], Z.shape)] == 0).all()

@@ -6,9 +6,10 @@ import dataclasses
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 import igljoin
-from igljoin import phantoms
+from igljoin import phantoms, terms
 from igljoin.join_terms import TERMS
 from igljoin.options import JoinOptions
 from igljoin.terms import ShapeTerm, SmoothJoinTerm, StretchTerm, check_order
@@ -61,3 +62,44 @@ def test_a_join_without_the_shape_term_still_converges(patch):
                        shape_weight=0.0)  # fmt: skip
     assert res.converged
     assert np.isfinite(res.guest.V).all()
+
+
+def _same_csr(a, b):
+    """The same sparse matrix to the bit: shape, layout (row pointers, column order), values."""
+    assert a.shape == b.shape
+    for name in ("indptr", "indices", "data"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.dtype == y.dtype and np.array_equal(x, y)
+
+
+@pytest.mark.parametrize("mode", ["band", "robust", "paper"])
+def test_a_terms_quadratic_is_the_straightforward_product_to_the_bit(mode):
+    # Kᵀ W K as the straightforward expression gives it, values and layout: later sums
+    # read the layout (a row of a sparse product is summed in its stored order), so a
+    # quadratic that differed in either would change the join's answers
+    for key in [("end_to_end", "equal"), ("partial_patch", "longer")]:
+        s = phantoms.paper_sample(*key)
+        smooth = _terms(s, smooth_mode=mode)[-1]
+        assert isinstance(smooth, SmoothJoinTerm)
+        K, w = smooth.K, smooth.weights
+        _same_csr(smooth.quadratic(), sp.csr_matrix(K.T @ sp.diags(w) @ K))
+        # rows of weight 0 (a seam vertex the term leaves alone)
+        w = np.where(np.arange(len(w)) % 3 == 0, 0.0, w)
+        _same_csr(terms._gram(K, w), sp.csr_matrix(K.T @ sp.diags(w) @ K))
+
+
+def test_the_quadratic_of_a_matrix_with_duplicate_entries_is_the_straightforward_product():
+    # duplicates are summed where the product meets them, so the expression itself runs
+    rng = np.random.default_rng(0)
+    rows, cols = rng.integers(0, 30, 400), rng.integers(0, 50, 400)
+    K = sp.csr_matrix((rng.normal(size=400), (rows, cols)), shape=(30, 50))
+    K = sp.csr_matrix((K.data, K.indices, K.indptr), shape=K.shape)  # a copy of canonical K
+    dup = sp.csr_matrix(
+        (np.concatenate([K.data, K.data[:5]]), np.concatenate([K.indices, K.indices[:5]]),
+         np.concatenate([K.indptr[:1], K.indptr[1:] + 5])),
+        shape=K.shape,
+    )  # fmt: skip
+    assert not dup.has_canonical_format
+    w = rng.uniform(0.5, 2.0, 30)
+    _same_csr(terms._gram(dup, w), sp.csr_matrix(dup.T @ sp.diags(w) @ dup))
+    _same_csr(terms._gram(K, w), sp.csr_matrix(K.T @ sp.diags(w) @ K))
