@@ -28,7 +28,7 @@ Methods (those whose package is missing are reported as such):
 
 * ``igl`` — libigl's ``min_quad_with_fixed`` (Eigen's simplicial LDLᵀ).
 * ``cholespy`` — what ``linear_solver="cholespy"`` does (CHOLMOD, simplicial,
-  its own AMD ordering).
+  its own nested-dissection ordering, NESDIS).
 * ``cholespy-nd`` / ``cholespy-rcm`` — the same on the matrix pre-permuted by
   METIS nested dissection (pymetis) / reverse Cuthill-McKee (scipy), to see
   whether CHOLMOD keeps the given order.
