@@ -203,7 +203,9 @@ def test_block_rotation_fit_is_the_per_vertex_newton(seed):
     failed = np.zeros(n, dtype=bool)
     any_failed = kernels._fit_rotations(A, hint, R, failed)
     ref = hint.copy()
-    settled = np.array([kernels._newton_rotation(A[v], ref[v], 8) for v in range(n)])
+    settled = np.array(
+        [kernels._newton_rotation(A[v], ref[v], kernels._MAX_STEPS) for v in range(n)]
+    )
     # the same operations in the same order: equal to the last bit, failures included
     assert np.array_equal(R, ref)
     assert np.array_equal(failed, ~settled)
@@ -214,17 +216,26 @@ def test_block_rotation_fit_is_the_per_vertex_newton(seed):
     assert any(settled[v] and not kernels._newton_rotation(A[v], short[v], 3) for v in range(n))
 
 
-def test_stretch_term_reads_the_edge_vectors_the_shape_term_left(tube):
+def test_stretch_term_reads_the_edge_vectors_the_shape_term_left(tube, monkeypatch):
     """The shape term's step leaves ``D X`` for the stretch term; both give what they give alone."""
     solver = _solver(tube)
     shape, stretch = solver.terms[0], solver.terms[1]
+    assert shape.E is stretch.E  # the cache is keyed by the edge array: one array for both
     X = _perturbed(solver, 0.3, 8)
     shared = LocalState(X)
     shape.local_into(shared, np.zeros_like(X))
     left = [v for k, v in shared.cache.items() if isinstance(k, tuple) and k[0] == "edges"]
     assert len(left) == 1 and np.array_equal(left[0], kernels.edge_vectors(X, stretch.E))
     G_shared = np.zeros_like(X)
-    e_shared = stretch.local_into(shared, G_shared)
+    computed = kernels.edge_vectors
+    with monkeypatch.context() as m:
+
+        def refuse(*args):
+            raise AssertionError("the stretch term computed the edge vectors again")
+
+        m.setattr(kernels, "edge_vectors", refuse)
+        e_shared = stretch.local_into(shared, G_shared)
+    assert kernels.edge_vectors is computed
     alone = LocalState(X, rotations=shared.rotations)
     G_alone = np.zeros_like(X)
     e_alone = stretch.local_into(alone, G_alone)
