@@ -43,7 +43,14 @@ from scipy.sparse import csgraph
 from . import coarse_kernels as ck
 from .errors import OptionsError
 from .linsolve import AugmentedQuadratic, FixedQuadratic, available_backends
-from .newton import dofs, factor_entries, gauss_newton_factors
+from .newton import (
+    dofs,
+    factor_entries,
+    factor_rows,
+    gauss_newton_factors,
+    rotation_pattern,
+    row_directions,
+)
 from .terms import ShapeTerm
 
 __all__ = [
@@ -205,6 +212,20 @@ def _cluster_columns(blocks: np.ndarray, labels: np.ndarray, a: int) -> sp.csr_m
     return sp.csr_matrix(
         (np.ascontiguousarray(blocks).ravel(), cols.ravel(), indptr), shape=(3 * m, w * a)
     )
+
+
+def _motion_matrix(values, ptr, members, D: int, w: int, a: int) -> sp.csr_matrix:
+    """The rows ``J A`` of :func:`igljoin.coarse_kernels.motion_rows_of`, shape (D r, w a).
+
+    Row ``r D + d`` holds ``w`` entries per cluster of ``members[ptr[r]:ptr[r + 1]]``.
+    """
+    q = np.diff(ptr)
+    indptr = np.r_[0, np.cumsum(np.repeat(w * q, D))].astype(np.int64)
+    # the columns of every row of K (w per cluster), repeated for each of its D rows
+    per_row = (w * members[:, None] + np.arange(w)[None, :]).ravel()
+    start = np.repeat(w * ptr[:-1], D)
+    cols = np.arange(indptr[-1]) - np.repeat(indptr[:-1] - start, np.diff(indptr))
+    return sp.csr_matrix((values, per_row[cols], indptr), shape=(D * len(q), w * a))
 
 
 def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
@@ -381,12 +402,18 @@ class TwoLevelModel:
         self.free_dofs = dofs(solver.free)
         self.labels = None
         self._cache = {}
-        # set at the first build: the free vertices' clusters by vertex (-1 fixed), which
-        # terms are kept apart, per factor whether it is a wide term's, the patterns found
+        # set at the first build: the free vertices' clusters by vertex (-1 fixed) and their
+        # rows in the motions, per term its operators' cluster patterns and whether it is
+        # kept apart, the blocks of A_c; at every build the motions (n_free, 3, w)
         self._vertex_labels = None
+        self._where = None
         self._wide = None
-        self._factor_wide = None
-        self._pattern = None
+        self._patterns = None
+        self._blocks = None
+        self._clusters = None
+        self.motions = None
+        self.factors = None
+        self._model_seconds = 0.0
         self.built_rotations = None
         self.factorizations = 0
         self.seconds = {"clusters": 0.0, "model": 0.0, "coarse": 0.0, "factor": 0.0}
@@ -429,7 +456,10 @@ class TwoLevelModel:
             self.labels = clusters(X, graph, self.cluster_size)
             self._vertex_labels = np.full(ls.n, -1, dtype=np.int64)
             self._vertex_labels[ls.free] = self.labels
-            self._wide = self._count(int(self.labels.max()) + 1, 9 if self.bending else 6)
+            self._where = np.full(ls.n, -1, dtype=np.int64)
+            self._where[ls.free] = np.arange(len(ls.free))
+            self._clusters = int(self.labels.max()) + 1
+            self._wide = self._count(self._clusters, 9 if self.bending else 6)
             if self.model_entries > MAX_MODEL_ENTRIES:
                 self.seconds["clusters"] += time.perf_counter() - t0
                 message = self._too_large()
@@ -438,19 +468,15 @@ class TwoLevelModel:
                 self.fallback = message
                 return False
         t1 = time.perf_counter()
-        self.factors, self._factor_wide = [], []
-        for term, wide in zip(ls.terms, self._wide):
-            part = gauss_newton_factors([term], state, ls.n, self._cache)
-            self.factors += part
-            self._factor_wide += [wide] * len(part)
-        t2 = time.perf_counter()
         blocks = _rigid_blocks(X, self.labels)
         if self.bending:
             blocks = np.concatenate([blocks, _bending_blocks(X, self.labels)], axis=2)
-        a = int(self.labels.max()) + 1
-        self.A = _cluster_columns(blocks, self.labels, a)
-        self.At = sp.csr_matrix(self.A.T)
-        coarse = self._project(blocks, a)
+        self.motions = np.ascontiguousarray(blocks)
+        del blocks
+        if self.balancing:
+            # the balancing form's products with H need the factors themselves
+            self.factors = gauss_newton_factors(ls.terms, state, ls.n, self._cache)
+        coarse = self._project(state)
         t3 = time.perf_counter()
         self.coarse_factor = self._factor(*coarse)
         self.factorizations += 1
@@ -458,8 +484,11 @@ class TwoLevelModel:
         if state.rotations is not None:
             self.built_rotations = state.rotations[ls.free].copy()
         t4 = time.perf_counter()
-        for key, dt in zip(self.seconds, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
-            self.seconds[key] += dt
+        self.seconds["clusters"] += t1 - t0
+        # _project splits its time between the model's values and the projection
+        self.seconds["coarse"] += t3 - t1 - self._model_seconds
+        self.seconds["model"] += self._model_seconds
+        self.seconds["factor"] += t4 - t3
         return first
 
     def _augmented(self) -> bool:
@@ -468,13 +497,16 @@ class TwoLevelModel:
         return ls.linear_solver in ("auto", "pardiso") and "pardiso" in available_backends()
 
     def _count(self, a: int, w: int) -> list:
-        """Which terms are wide; sets the entries counted from the terms' patterns.
+        """Which terms are wide; finds the patterns and counts the entries the model will hold.
 
-        Only the operators' patterns and the clusters are read: ``A_c``'s
-        local blocks are those of ``Tᵀ T`` for the clusters' incidence ``T``
-        of the local rows (:func:`igljoin.coarse_kernels.block_pattern`),
-        ``w²`` entries each; a wide term adds ``w`` entries per cluster each
-        of its rows reaches, times 3 (at most three factor rows per row).
+        Only the operators' patterns and the clusters are read: every row of a
+        term's operator ``K`` (and of the Laplacian ``L`` of a rotation-aware
+        shape term) reaches some clusters (:func:`igljoin.coarse_kernels.row_clusters`,
+        kept for the projections); ``A_c``'s local blocks are those of
+        ``Tᵀ T`` for the clusters' incidence ``T`` of the local rows
+        (:func:`igljoin.coarse_kernels.block_pattern`), ``w²`` entries each;
+        a wide term adds ``w`` entries per cluster each of its factor rows
+        reaches (:func:`igljoin.newton.row_directions` rows per row of ``K``).
 
         Returns
         -------
@@ -482,14 +514,19 @@ class TwoLevelModel:
             Per term of the solver: kept as rows of ``J A``.
         """
         augmented = self._augmented()
-        local, wide, wide_entries = [], [], 0
+        local, wide, wide_entries, operators = [], [], 0, 0
+        self._patterns = []
         for term in self.solver.terms:
-            patterns = [sp.csr_matrix(term.K)]
+            K = sp.csr_matrix(term.K)
+            of_K = ck.row_clusters(K.indptr, K.indices, self._vertex_labels, 1)
+            of_L = None
+            reach, count = len(of_K[1]), K.shape[0]
+            operators += K.nnz
             if isinstance(term, ShapeTerm) and term.rotation_aware:
-                patterns.append(sp.csr_matrix(term.L))
-            rows = [ck.row_clusters(P.indptr, P.indices, self._vertex_labels, 1) for P in patterns]
-            reach = sum(len(r[1]) for r in rows)
-            count = sum(P.shape[0] for P in patterns)
+                (Lptr, Lind, _), *_ = rotation_pattern(term, self._cache)
+                of_L = ck.row_clusters(Lptr, Lind, self._vertex_labels, 1)
+                reach, count = reach + len(of_L[1]), count + len(Lptr) - 1
+                operators += len(Lind)
             # the eliminated rotations' factor enters with a minus sign: never kept apart
             keep_apart = (
                 augmented
@@ -498,12 +535,18 @@ class TwoLevelModel:
             )
             wide.append(bool(keep_apart))
             if keep_apart:
-                wide_entries += 3 * w * reach
+                wide_entries += row_directions(term) * w * reach
             else:
-                local += [(ptr, members) for ptr, members, _ in rows]
-        blocks = len(ck.block_pattern(local, a)[1])
-        self.coarse_entries = int(w * w * blocks + wide_entries)
-        self.model_entries = self.coarse_entries + sum(factor_entries(t) for t in self.solver.terms)
+                local += [p[:2] for p in (of_K, of_L) if p is not None]
+            self._patterns.append((K, of_K, of_L))
+        self._blocks = ck.block_pattern(local, a)
+        self.coarse_entries = int(w * w * len(self._blocks[1]) + wide_entries)
+        # besides the coarse system: the operators' cluster patterns, every free vertex's
+        # motions and, for the balancing form, the factors themselves
+        held = operators + 3 * w * len(self.labels)
+        if self.balancing:
+            held += sum(factor_entries(t) for t in self.solver.terms)
+        self.model_entries = self.coarse_entries + held
         return wide
 
     def _too_large(self) -> str:
@@ -551,14 +594,16 @@ class TwoLevelModel:
         backend = "pardiso" if self._augmented() else ls.linear_solver
         return FixedQuadratic(Ac, np.zeros(0, dtype=np.int64), backend)
 
-    def _project(self, blocks: np.ndarray, a: int) -> tuple:
-        """``A_c = Aᵀ H A`` from the factors, plus the ridge; shape (w a, w a).
+    def _project(self, state) -> tuple:
+        """``A_c = Aᵀ H A`` from the terms' factor rows, plus the ridge; shape (w a, w a).
 
-        The patterns of the factors and of ``A_c`` are found at the first
-        build (and again only if a factor's pattern changed); a rebuild
-        recomputes values only (:func:`igljoin.coarse_kernels.project`).
-        The wide terms' factors are not projected but kept as rows ``J A``
-        (:func:`igljoin.coarse_kernels.motion_rows`).
+        Term after term, the model's values at ``state``
+        (:func:`igljoin.newton.factor_rows`) are projected onto the motions
+        without forming the factors ``J``
+        (:func:`igljoin.coarse_kernels.project_rows`,
+        :func:`igljoin.coarse_kernels.project_rotation`), on the patterns
+        found at the first build. The wide terms' rows are not projected but
+        kept as rows ``J A`` (:func:`igljoin.coarse_kernels.motion_rows_of`).
 
         Returns
         -------
@@ -568,53 +613,45 @@ class TwoLevelModel:
             The wide terms' rows ``J A``.
         weights : ndarray, shape (rows,), or None
         """
-        mats = [sp.csr_matrix(J) for J, _, _ in self.factors]
-        pattern = self._pattern
-        same = pattern is not None and len(pattern[0]) == len(mats)
-        # the cached factors share their index arrays from build to build: no copies kept
-        same = same and all(
-            (J.indptr is p or np.array_equal(J.indptr, p))
-            and (J.indices is i or np.array_equal(J.indices, i))
-            for J, p, i in zip(mats, pattern[0], pattern[1])
-        )
-        if not same:
-            # per factor: the clusters each row reaches; the blocks of A_c are the cluster
-            # pairs some local row reaches
-            rows = [ck.row_clusters(J.indptr, J.indices, self._vertex_labels) for J in mats]
-            local = [(r[0], r[1]) for r, wide in zip(rows, self._factor_wide) if not wide]
-            self._pattern = (
-                [J.indptr for J in mats],
-                [J.indices for J in mats],
-                rows,
-                ck.block_pattern(local, a),
-            )
-        bptr, bcols, lower, upper = self._pattern[3]
-        w = blocks.shape[2]
-        B = np.zeros((self.solver.n, 3, w))
-        B[self.solver.free] = blocks
+        ls = self.solver
+        a = self._clusters
+        B = self.motions
+        w = B.shape[2]
+        where = self._where
+        bptr, bcols, lower, upper = self._blocks
         out = np.zeros((len(bcols), w, w))
         wide_rows, wide_weights = [], []
-        for J, (_, wf, sign), (ptr, members, slot), wide in zip(
-            mats, self.factors, self._pattern[2], self._factor_wide
-        ):
-            weights = sign * np.asarray(wf, dtype=np.float64)
-            if wide:
-                values = ck.motion_rows(J.indptr, J.indices, J.data, ptr, slot, B)
-                cols = (w * members[:, None] + np.arange(w)[None, :]).ravel()
-                wide_rows.append(
-                    sp.csr_matrix((values, cols, w * ptr), shape=(len(ptr) - 1, w * a))
+        self._model_seconds = 0.0
+        for term, (K, of_K, of_L), wide in zip(ls.terms, self._patterns, self._wide):
+            t0 = time.perf_counter()
+            rows, rotation = factor_rows(term, state, self._cache)
+            self._model_seconds += time.perf_counter() - t0
+            for _, directions, weights in rows:
+                weights = np.ascontiguousarray(weights, dtype=np.float64)
+                directions = (
+                    np.zeros((0, 3, 3))
+                    if directions is None
+                    else np.ascontiguousarray(directions, dtype=np.float64)
                 )
-                wide_weights.append(weights)
-                continue
-            ck.project(
-                J.indptr, J.indices, J.data, weights, ptr, members, slot, bptr, bcols, B, out
-            )
+                args = (K.indptr, K.indices, K.data, directions)
+                if wide:
+                    values = ck.motion_rows_of(*args, of_K[0], of_K[2], where, B)
+                    wide_rows.append(
+                        _motion_matrix(values, of_K[0], of_K[1], weights.shape[1], w, a)
+                    )
+                    wide_weights.append(weights.ravel())
+                    continue
+                ck.project_rows(*args, weights, *of_K, bptr, bcols, where, B, out)
+            if rotation is not None:
+                (Lptr, Lind, _), *_ = rotation_pattern(term, self._cache)
+                ck.project_rotation(Lptr, Lind, rotation, *of_L, bptr, bcols, where, B, out)
         out[lower] = out[upper].transpose(0, 2, 1)
         Ac = sp.bsr_matrix((out, bcols, bptr), shape=(w * a, w * a)).tocsr()
+        del out
         diagonal = Ac.diagonal()
         U = weights = None
         if wide_rows:
-            U = sp.csr_matrix(sp.vstack(wide_rows, format="csr"))
+            U = wide_rows[0] if len(wide_rows) == 1 else sp.vstack(wide_rows, format="csr")
             weights = np.concatenate(wide_weights)
             # the diagonal of Uᵀ W U: the ridge is relative to the whole A_c's
             diagonal = diagonal + np.bincount(
@@ -625,9 +662,20 @@ class TwoLevelModel:
         Ac.setdiag(Ac.diagonal() + _RIDGE * diagonal.mean())
         return Ac, U, weights
 
+    @property
+    def A(self) -> sp.csr_matrix:
+        """The clusters' motions ``A`` assembled, shape (3 n_free, w a) — for checks.
+
+        The model keeps them as :attr:`motions` (n_free, 3, w) and applies
+        ``A`` and ``Aᵀ`` from there.
+        """
+        return _cluster_columns(self.motions, self.labels, self._clusters)
+
     def _coarse(self, v: np.ndarray) -> np.ndarray:
         """``A A_c⁻¹ Aᵀ v`` for ``v`` of shape (3 n_free,)."""
-        return self.A @ self.coarse_factor.solve_free((self.At @ v)[:, None])[:, 0]
+        B, labels = self.motions, self.labels
+        coarse = ck.restrict(B, labels, v, self._clusters)
+        return ck.prolong(B, labels, self.coarse_factor.solve_free(coarse[:, None])[:, 0])
 
     def _model(self, v: np.ndarray) -> np.ndarray:
         """``H_ff v`` for ``v`` of shape (3 n_free,), from the factored model."""

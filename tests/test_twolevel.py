@@ -214,23 +214,6 @@ def test_a_rebuild_projects_the_model_at_the_new_positions(patch):
     assert np.linalg.norm(got @ x - b) <= 1e-5 * np.linalg.norm(b)
 
 
-def test_factors_from_the_cache_are_the_reference_factors(patch):
-    ls = patch.solver
-    start, later = _moved_states(patch)
-    cache = {}
-    newton.gauss_newton_factors(ls.terms, start, ls.n, cache)  # fills the cache
-    for state in (start, later):
-        ref = newton.gauss_newton_factors(ls.terms, state, ls.n)
-        got = newton.gauss_newton_factors(ls.terms, state, ls.n, cache)
-        assert len(ref) == len(got)
-        for (J0, w0, s0), (J1, w1, s1) in zip(ref, got):
-            assert s0 == s1 and J0.shape == J1.shape
-            # the compiled rotation factor inverts 3 x 3 blocks by cofactors, numpy by
-            # LAPACK: the same matrix to rounding (1e-12 of its largest entry)
-            assert abs(J0 - J1).max() <= 1e-12 * abs(J0).max()
-            assert np.array_equal(w0, w1)
-
-
 def test_no_rebuild_before_the_first_rebuild_iteration_nor_past_the_cap(patch):
     ls = patch.solver
     start, later = _moved_states(patch)
