@@ -15,8 +15,9 @@ motions — three translations and three infinitesimal rotations about its
 centroid at the current positions (:func:`rigid_prolongation`) — and three
 bending motions (:func:`bending_prolongation`; ``A`` of shape (3 m, 9 a)).
 The coarse matrix ``A_c = Aᵀ H A`` is the model ``H`` projected onto them,
-computed from the model's factored form
-(:func:`igljoin.newton.gauss_newton_factors`) without assembling ``H``, and
+computed from the model's factor rows on the terms' operators
+(:func:`igljoin.newton.factor_rows`) without assembling ``H`` or forming
+its factors, and
 factored (9 a unknowns, a few thousand); both are rebuilt at the current
 iterate when the guest has turned far from where they were built (the
 values only: the patterns are the first build's; the coarse system is then
@@ -77,10 +78,10 @@ _RIDGE = 1e-10
 #: 87 M, 3.4 GB; the 1M tube counts 340 M, ~13 GB over the solver's 8 GB: its build was
 #: stopped at 16 GB in all); 2e8 entries are ~7.5 GB. Past it ``preconditioner="auto"``
 #: keeps the factored ``P`` and ``"two-level"`` is refused.
-MAX_MODEL_ENTRIES = 200_000_000
+MAX_MODEL_ENTRIES = 160_000_000
 
 #: Bytes a first build spends per counted entry (the upper end of the 36-39 measured above).
-_BYTES_PER_ENTRY = 39
+_BYTES_PER_ENTRY = 50
 
 # a term whose rows reach this many clusters on average (the smooth join's band rows:
 # 82 at 100k guest vertices, 222 at 300k) is kept as rows of J A beside A_c's local part
@@ -97,6 +98,11 @@ class _CoarseAugmented(AugmentedQuadratic):
     #: 1.6e-8 on a 100k tube, as the assembled ``A_c``'s own factorization leaves); a
     #: singular system whose zero pivots were perturbed leaves one of order 1
     PROBE_RESIDUAL = 1e-4
+
+    def __init__(self, S: sp.csr_matrix, U: sp.csr_matrix, weights: np.ndarray):
+        super().__init__(S, U, weights, 1.0, np.zeros(0, dtype=np.int64))
+        # Uᵀ serves products only: its transposed view instead of the copy made above
+        self.Kft = self.Kf.T
 
 
 def clusters(X: np.ndarray, graph: sp.spmatrix, size: int) -> np.ndarray:
@@ -133,9 +139,7 @@ def clusters(X: np.ndarray, graph: sp.spmatrix, size: int) -> np.ndarray:
     for _ in range(8):
         # a surface fills few cells of a volume grid: shrink the cell until they hold
         # about size vertices (the count per cell scales with the cell's area)
-        keys = np.floor((X - lo) / h).astype(np.int64)
-        _, cell = np.unique(keys, axis=0, return_inverse=True)
-        cell = cell.ravel()
+        cell = _grid_cells(np.floor((X - lo) / h).astype(np.int64))
         ratio = m / (int(cell.max()) + 1) / size
         if 0.7 < ratio < 1.4:
             break
@@ -156,6 +160,19 @@ def clusters(X: np.ndarray, graph: sp.spmatrix, size: int) -> np.ndarray:
         source[lost] = m + part
     _, labels = np.unique(source, return_inverse=True)
     return labels.astype(np.int64).ravel()
+
+
+def _grid_cells(keys: np.ndarray) -> np.ndarray:
+    """The cell of every vertex (m,) from its grid coordinates (m, 3) ≥ 0, numbered as
+    ``np.unique(keys, axis=0)`` numbers them (ascending x, then y, then z)."""
+    span = keys.max(axis=0) + 1
+    if float(np.prod(span.astype(np.float64))) < 2.0**62:
+        # one integer per cell, ordered as its row: the same numbers for a tenth of the sort
+        flat = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
+        _, cell = np.unique(flat, return_inverse=True)
+    else:
+        _, cell = np.unique(keys, axis=0, return_inverse=True)
+    return cell.ravel()
 
 
 def rigid_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
@@ -304,9 +321,9 @@ class TwoLevelModel:
     grow on the patch (35 / 30 / 41 / 55 at 10k / 20k / 40k / 100k against
     100 / 134 / 228 / 248), and on the tube they grow more slowly (73 / 162 /
     203 / 230 against 199 / 342 / 486 / 746). A rebuild computes
-    values only — the patterns of the factors and of ``A_c`` are the first
-    build's — and factors ``A_c`` anew: about 0.5 s at 40k guest vertices
-    with the band rows kept apart (below; 2 s at 100k, 8 s at 300k). Rebuilds in the
+    values only — the operators' cluster patterns and ``A_c``'s are the
+    first build's — and factors ``A_c`` anew: about 1 s at 100k guest
+    vertices with the band rows kept apart (below; 4 s at 300k). Rebuilds in the
     first iterations, while the guest still moves far, led the paper's
     longer patch (compressed into its hole) to another stationary point 1 %
     higher in energy;
@@ -320,11 +337,17 @@ class TwoLevelModel:
     cluster it reaches) are kept beside the rest ``S`` of ``A_c`` and the
     augmented system ``[[S, (J A)ᵀ], [J A, −W⁻¹]]`` is factored instead
     (:class:`igljoin.linsolve.AugmentedQuadratic`): the same ``A_c⁻¹``,
-    without the dense block. Before anything is built, the entries the coarse
-    system and the model's factors will hold are counted
-    (:attr:`model_entries`); above :data:`MAX_MODEL_ENTRIES` the model is
-    refused (an ``OptionsError``) or, with ``fall_back``, stays the factored
-    ``P`` (:attr:`fallback` says why).
+    without the dense block. Before anything is built, the entries the model
+    will hold are counted (:attr:`model_entries`); above
+    :data:`MAX_MODEL_ENTRIES` the model is refused (an ``OptionsError``) or,
+    with ``fall_back``, stays the factored ``P`` (:attr:`fallback` says why).
+
+    What a build keeps: the coarse system and its factorization, the
+    operators' cluster patterns and every free vertex's motions
+    (:attr:`motions`; ``A`` and ``Aᵀ`` are applied from them). The
+    Gauss–Newton model's factors are never formed for the additive form; the
+    balancing form keeps them (:attr:`factors`) for its products with ``H``.
+    A rebuild lets the last factorization go before it makes the next.
 
     Parameters
     ----------
@@ -364,13 +387,21 @@ class TwoLevelModel:
     built_at : list of int
         Iteration of every build.
     seconds : dict
-        ``clusters``, ``model`` (the factored Gauss–Newton model), ``coarse``
+        ``clusters``, ``model`` (the Gauss–Newton model's values), ``coarse``
         (``Aᵀ H A``) and ``factor`` times, summed over the builds.
     coarse_entries : int or None
         Entries of the coarse system counted at the first refresh (an upper
-        bound with band rows kept apart).
+        bound with band rows kept apart: their rows of zero weight are left
+        out of the factorization).
     model_entries : int or None
-        Those and the Gauss–Newton model's factors' entries.
+        Those, one per entry of the terms' operators (their cluster
+        patterns), ``3 w`` per free vertex (its motions) and, for the
+        balancing form, the Gauss–Newton model's factors' entries.
+    motions : ndarray, shape (n_free, 3, w), or None
+        Every free vertex's rows of ``A`` (:attr:`A` assembles them), ``w``
+        = 6, or 9 with ``bending``.
+    factors : list or None
+        The balancing form's :func:`igljoin.newton.gauss_newton_factors`.
     fallback : str or None
         Why the coarse correction was not built (``fall_back`` and too many
         entries): the model is then ``P⁻¹`` alone; ``None`` otherwise.
@@ -415,6 +446,7 @@ class TwoLevelModel:
         self.factors = None
         self._model_seconds = 0.0
         self.built_rotations = None
+        self.coarse_factor = None
         self.factorizations = 0
         self.seconds = {"clusters": 0.0, "model": 0.0, "coarse": 0.0, "factor": 0.0}
 
@@ -468,6 +500,9 @@ class TwoLevelModel:
                 self.fallback = message
                 return False
         t1 = time.perf_counter()
+        # a rebuild lets the last factorization go first: the two together are the
+        # build's peak (a 1M tube's coarse factorization holds ~5 GB)
+        self.coarse_factor = self.factors = None
         blocks = _rigid_blocks(X, self.labels)
         if self.bending:
             blocks = np.concatenate([blocks, _bending_blocks(X, self.labels)], axis=2)
@@ -590,7 +625,7 @@ class TwoLevelModel:
         """
         ls = self.solver
         if U is not None:
-            return _CoarseAugmented(Ac, U, weights, 1.0, np.zeros(0, dtype=np.int64))
+            return _CoarseAugmented(Ac, U, weights)
         backend = "pardiso" if self._augmented() else ls.linear_solver
         return FixedQuadratic(Ac, np.zeros(0, dtype=np.int64), backend)
 

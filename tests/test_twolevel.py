@@ -37,6 +37,16 @@ def test_clusters_are_connected_and_about_the_size_asked(patch):
             assert parts == 1
 
 
+def test_grid_cells_are_numbered_as_the_rows_unique():
+    rng = np.random.default_rng(4)
+    small = rng.integers(0, 7, (500, 3))
+    # spans whose product passes 2⁶² take the rows' unique itself
+    huge = np.c_[rng.integers(0, 2**31, 500), rng.integers(0, 2**31, 500), small[:, 2]]
+    for keys in (small, huge):
+        _, expected = np.unique(keys, axis=0, return_inverse=True)
+        assert np.array_equal(twolevel._grid_cells(keys), expected.ravel())
+
+
 def test_prolongation_spans_each_clusters_rigid_motions():
     rng = np.random.default_rng(1)
     X = rng.standard_normal((12, 3))
