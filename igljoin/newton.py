@@ -94,8 +94,8 @@ def _index_arrays(cols: np.ndarray, indptr: np.ndarray, shape: tuple) -> tuple:
 
 def _unit_rows(term, weights: np.ndarray) -> tuple:
     """``K ⊗ I₃`` as rows: the three unit directions of every row, weights (r, 3)."""
-    return (term.K, None, np.broadcast_to(np.asarray(weights, dtype=np.float64)[:, None],
-                                          (len(weights), 3)))  # fmt: skip
+    weights = np.asarray(weights, dtype=np.float64)
+    return (term.K, None, np.broadcast_to(weights[:, None], (len(weights), 3)))
 
 
 def _stretch_rows(term: StretchTerm, state: LocalState) -> tuple:
