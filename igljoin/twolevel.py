@@ -80,16 +80,16 @@ _RIDGE = 1e-10
 #: coarse system, :attr:`TwoLevelModel.coarse_entries`, the operators' cluster patterns and
 #: the free vertices' motions; the balancing form adds the Gauss–Newton model's factors,
 #: :func:`igljoin.newton.factor_entries`), counted from the patterns before any of it is
-#: built. Measured with Pardiso, the first build peaks 39-47 bytes per entry above the
-#: solver's own memory, most of it the coarse factorization (100k tube: 10.7 M entries,
-#: 0.42 GB; 100k patch: 11.0 M, 0.48 GB; 300k tube: 34 M, 1.6 GB; the 1M tube counts 131 M
-#: and its join went from 7.8 GB after the set-up to 14.8 GB at the first build, at most
-#: 53 bytes per entry); a rebuild lets the last factorization go first and adds a quarter of
-#: that. 1.6e8 entries are about 8 GB. Past it ``preconditioner="auto"`` keeps the
-#: factored ``P`` and ``"two-level"`` is refused.
+#: built. Measured with Pardiso, the first build peaks 36-40 bytes per entry above the
+#: solver's own memory, most of it the coarse factorization (100k patch: 11.0 M entries,
+#: 0.39 GB; 300k tube: 34 M, 1.35 GB); the 1M tube counts 131 M, and its join went from
+#: 7.8 GB after the set-up to 14.8 GB at the first build (at most 53 bytes per entry, with
+#: copies of the coarse system since dropped). A rebuild lets the last factorization go
+#: first and adds a fifth of that. 1.6e8 entries are about 8 GB. Past it
+#: ``preconditioner="auto"`` keeps the factored ``P`` and ``"two-level"`` is refused.
 MAX_MODEL_ENTRIES = 160_000_000
 
-#: Bytes a first build spends per counted entry (the 39-53 measured above, rounded up).
+#: Bytes a first build spends per counted entry (the 36-53 measured above, rounded up).
 _BYTES_PER_ENTRY = 50
 
 # a term whose rows reach this many clusters on average (the smooth join's band rows:
