@@ -148,7 +148,9 @@ class _CoarseAugmented(AugmentedQuadratic):
         try:
             self._pardiso = _Pardiso(A, indefinite=True)
         except _PardisoError as exc:
-            raise SolveError(f"{exc}; the coarse system could not be factored") from exc
+            raise SolveError(
+                f"{exc}; the coarse system could not be factored: use preconditioner='factored'"
+            ) from exc
         probe = np.ones((n, 1))
         x = self.solve_free(probe)
         if not np.isfinite(x).all() or self.residual(x, probe) > self.PROBE_RESIDUAL:

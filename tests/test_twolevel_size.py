@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 import igljoin
 from igljoin import coarse_kernels, linsolve, newton, twolevel
@@ -156,3 +157,20 @@ def test_auto_keeps_the_factored_form_when_the_coarse_system_is_too_large(monkey
     # and the solver keeps the model, which says why it kept P
     assert "MAX_MODEL_ENTRIES" in solver.last_model.fallback
     assert solver.last_run.stats["model_builds"] == 0
+
+
+@pardiso
+def test_a_singular_coarse_system_is_refused_with_the_way_out():
+    # A_c = S + Uᵀ W U of rank 1 on four unknowns: Pardiso perturbs the zero pivots, and the
+    # probe solve's residual (of order 1) gives it away
+    S = sp.csr_matrix((4, 4))
+    U = sp.csr_matrix(np.array([[1.0, 1.0, 0.0, 0.0]]))
+    with pytest.raises(igljoin.SolveError, match="coarse system.*preconditioner='factored'"):
+        twolevel._CoarseAugmented(S, U, np.ones(1))
+    # the same system made definite by its S is factored, and solves A_c x = b
+    S = sp.identity(4, format="csr")
+    f = twolevel._CoarseAugmented(S, U, np.ones(1))
+    b = np.arange(1.0, 5.0)[:, None]
+    A = (S + U.T @ U).toarray()
+    # a 4 x 4 LDLᵀ solve: rounding, far below 1e-12
+    assert np.abs(A @ f.solve_free(b) - b).max() <= 1e-12 * np.abs(b).max()
