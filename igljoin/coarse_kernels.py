@@ -199,8 +199,9 @@ def _inverse_cholesky(S, Z):
 def rotation_factor(indptr, indices, ldata, R, delta, E, rest, own_own, own_other, w, mu):
     """Values of the rotations' elimination factor ``C`` (``Σ_i M_i S_i⁻¹ M_iᵀ = CᵀC``).
 
-    The same matrix as :func:`igljoin.newton.gauss_newton_factors`'s numpy
-    reference: the Laplacian row of vertex ``i`` (coefficients ``L[i, v]``,
+    The factor of :func:`igljoin.newton.gauss_newton_factors` with the minus
+    sign (tests/test_newton.py checks it against a numpy transcription of
+    the model): the Laplacian row of vertex ``i`` (coefficients ``L[i, v]``,
     target ``c = R_i δ_i``) and its one-ring edge rows (weight ``w μ``,
     targets ``±R_o e₀``) give ``M_i`` (a (3, 3) block per entry of ``L``'s
     row ``i``) and ``S_i``; row ``3 i + c`` of ``C`` holds ``(M_p Z_i)[a, c]``
