@@ -1,14 +1,17 @@
 """Compiled (numba) projection of the factored Gauss–Newton model onto a coarse space.
 
 The two-level preconditioner (:mod:`igljoin.twolevel`) needs
-``A_c = Σ s (J A)ᵀ diag(w) (J A)`` for the stacked factors ``J`` of
-:func:`igljoin.newton.gauss_newton_factors` and the clusters' motions ``A``
-(every free vertex ``v`` carries one dense block ``B_v`` of shape (3, w) in
-its cluster's ``w`` columns). The sparsity patterns of ``J``, of ``J A``
-and of ``A_c`` depend on the mesh and the clusters only, not on the
-positions: :func:`row_clusters` and :func:`block_pattern` find them once,
-and :func:`project` recomputes the values of ``A_c``'s (w, w) blocks at a
-rebuild, one pass over ``J``'s rows with no sparse product.
+``A_c = Σ s (J A)ᵀ diag(w) (J A)`` for the factor rows ``J`` of
+:func:`igljoin.newton.factor_rows` (rows ``K_r ⊗ d`` of the terms'
+operators, and the rotations' factor on the Laplacian's pattern) and the
+clusters' motions ``A`` (every free vertex ``v`` carries one dense block
+``B_v`` of shape (3, w) in its cluster's ``w`` columns). The sparsity
+patterns of ``J A`` and of ``A_c`` depend on the mesh and the clusters
+only, not on the positions: :func:`row_clusters` (on the operators) and
+:func:`block_pattern` find them once, and :func:`project_rows` and
+:func:`project_rotation` recompute the values of ``A_c``'s (w, w) blocks at
+a rebuild, one pass over the operators' rows without forming ``J``.
+:func:`restrict` and :func:`prolong` apply ``Aᵀ`` and ``A`` from the blocks.
 """
 
 from __future__ import annotations
@@ -16,7 +19,16 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-__all__ = ["row_clusters", "block_pattern", "project", "motion_rows", "rotation_factor"]
+__all__ = [
+    "row_clusters",
+    "block_pattern",
+    "project_rows",
+    "project_rotation",
+    "motion_rows_of",
+    "rotation_factor",
+    "restrict",
+    "prolong",
+]
 
 
 @nb.njit(cache=True, inline="always")
@@ -30,21 +42,6 @@ def _position(out, start, stop, c):
         else:
             hi = mid
     return lo
-
-
-@nb.njit(cache=True, inline="always")
-def _add_row_motions(JA, r, indptr, indices, data, slot, B):
-    """Add row ``r`` of ``J`` times the motions ``B`` into ``JA`` (q, w): one row per cluster."""
-    w = B.shape[2]
-    for p in range(indptr[r], indptr[r + 1]):
-        s = slot[p]
-        if s < 0:
-            continue
-        v = indices[p] // 3
-        c = indices[p] - 3 * v
-        x = data[p]
-        for k in range(w):
-            JA[s, k] += x * B[v, c, k]
 
 
 @nb.njit(cache=True)
@@ -154,54 +151,6 @@ def _offsets(rows: list):
         off += len(members)
 
 
-@nb.njit(cache=True)
-def project(indptr, indices, data, weights, ptr, clusters, slot, bptr, bcols, B, blocks):
-    """Add ``Σ_r w_r (J_r A)ᵀ (J_r A)`` into ``blocks`` (b, w, w): the blocks on and above
-    the diagonal only (the caller copies the transposes below it).
-
-    Parameters
-    ----------
-    indptr, indices, data : ndarray
-        ``J`` in CSR form, shape (r + 1,), (nnz,), (nnz,); columns ``3 v + c``.
-    weights : ndarray, shape (r,)
-        Signed row weights ``s w``.
-    ptr, clusters, slot : ndarray
-        From :func:`row_clusters`.
-    bptr, bcols : ndarray of int64
-        ``A_c``'s block pattern (:func:`block_pattern`); the block of a
-        row's cluster pair is found in it by bisection.
-    B : ndarray, shape (n, 3, w)
-        Every vertex's motions (any values at a fixed vertex: never read).
-    blocks : ndarray, shape (b, w, w)
-        Accumulated into.
-    """
-    w = B.shape[2]
-    most = 0
-    for r in range(len(ptr) - 1):
-        most = max(most, ptr[r + 1] - ptr[r])
-    JA = np.zeros((most, w))
-    for r in range(len(ptr) - 1):
-        q = ptr[r + 1] - ptr[r]
-        wr = weights[r]
-        if q == 0 or wr == 0.0:
-            continue
-        JA[:q, :] = 0.0
-        _add_row_motions(JA, r, indptr, indices, data, slot, B)
-        first = ptr[r]
-        for i in range(q):
-            # the row's clusters ascend: each pair's block lies past the one before
-            lo = bptr[clusters[first + i]]
-            end = bptr[clusters[first + i] + 1]
-            for j in range(i, q):
-                b = _position(bcols, lo, end, clusters[first + j])
-                lo = b + 1
-                for k in range(w):
-                    y = wr * JA[i, k]
-                    if y != 0.0:
-                        for m in range(w):
-                            blocks[b, k, m] += y * JA[j, m]
-
-
 @nb.njit(cache=True, inline="always")
 def _add_cross(out, c, s):
     """``out += s [c]×`` for a (3, 3) ``out``."""
@@ -250,8 +199,9 @@ def _inverse_cholesky(S, Z):
 def rotation_factor(indptr, indices, ldata, R, delta, E, rest, own_own, own_other, w, mu):
     """Values of the rotations' elimination factor ``C`` (``Σ_i M_i S_i⁻¹ M_iᵀ = CᵀC``).
 
-    The same matrix as :func:`igljoin.newton.gauss_newton_factors`'s numpy
-    reference: the Laplacian row of vertex ``i`` (coefficients ``L[i, v]``,
+    The factor of :func:`igljoin.newton.gauss_newton_factors` with the minus
+    sign (tests/test_newton.py checks it against a numpy transcription of
+    the model): the Laplacian row of vertex ``i`` (coefficients ``L[i, v]``,
     target ``c = R_i δ_i``) and its one-ring edge rows (weight ``w μ``,
     targets ``±R_o e₀``) give ``M_i`` (a (3, 3) block per entry of ``L``'s
     row ``i``) and ``S_i``; row ``3 i + c`` of ``C`` holds ``(M_p Z_i)[a, c]``
@@ -315,30 +265,227 @@ def rotation_factor(indptr, indices, ldata, R, delta, E, rest, own_own, own_othe
     return out
 
 
-@nb.njit(cache=True)
-def motion_rows(indptr, indices, data, ptr, slot, B):
-    """The values of ``J A``: every row of ``J`` on its clusters' motions.
+@nb.njit(cache=True, inline="always")
+def _pair_blocks(pairs, first, q, clusters, bptr, bcols):
+    """The block of ``A_c`` of every cluster pair ``i ≤ j`` of a row (``q`` clusters).
 
-    Row ``r`` of ``J A`` has ``w`` entries per cluster it touches, at
-    columns ``w k .. w k + w − 1`` for its clusters ``k`` (ascending): CSR
-    with ``indptr = w ptr``.
+    ``pairs[i * q + j]`` (``j ≥ i``) is found by bisection in the block row
+    of the row's ``i``-th cluster; the clusters ascend, so each pair's block
+    lies past the one before.
+    """
+    for i in range(q):
+        lo = bptr[clusters[first + i]]
+        end = bptr[clusters[first + i] + 1]
+        for j in range(i, q):
+            b = _position(bcols, lo, end, clusters[first + j])
+            pairs[i * q + j] = b
+            lo = b + 1
+
+
+@nb.njit(cache=True, inline="always")
+def _add_pairs(blocks, pairs, JA, q, wr):
+    """``blocks[b(i, j)] += wr JA[i]ᵀ JA[j]`` for the row's cluster pairs ``i ≤ j``."""
+    w = JA.shape[1]
+    for i in range(q):
+        for j in range(i, q):
+            b = pairs[i * q + j]
+            for k in range(w):
+                y = wr * JA[i, k]
+                if y != 0.0:
+                    for m in range(w):
+                        blocks[b, k, m] += y * JA[j, m]
+
+
+@nb.njit(cache=True)
+def project_rows(
+    indptr, indices, data, directions, weights, ptr, clusters, slot, bptr, bcols, where, B, blocks
+):
+    """Add ``Σ_r Σ_d w_rd (J_rd A)ᵀ (J_rd A)`` for the rows ``J_rd = K_r ⊗ d`` into ``blocks``.
+
+    The rows of :func:`igljoin.newton.factor_rows`, without forming them:
+    for every row ``K_r`` of the operator its clusters' motions ``K_r B``
+    (3 coordinates each) are summed once, and each direction ``d`` of the
+    row combines them. Only the blocks on and above the diagonal are
+    written (the caller copies the transposes below it).
 
     Parameters
     ----------
     indptr, indices, data : ndarray
-        ``J`` in CSR form, shape (r + 1,), (nnz,), (nnz,); columns ``3 v + c``.
-    ptr, slot : ndarray
-        From :func:`row_clusters`.
-    B : ndarray, shape (n, 3, w)
-        Every vertex's motions (never read at a fixed vertex).
+        ``K`` in CSR form, shape (r + 1,), (nnz,), (nnz,); columns are vertices.
+    directions : ndarray, shape (r, D, 3), or shape (0, 3, 3)
+        Every row's directions; empty: the unit directions (``D = 3``).
+    weights : ndarray, shape (r, D)
+        Signed weights.
+    ptr, clusters, slot : ndarray
+        :func:`row_clusters` of ``K`` (stride 1).
+    bptr, bcols : ndarray of int64
+        ``A_c``'s block pattern (:func:`block_pattern`).
+    where : ndarray of int64, shape (n,)
+        Every vertex's row in ``B`` (read at free vertices only).
+    B : ndarray, shape (m, 3, w)
+        Every free vertex's motions.
+    blocks : ndarray, shape (b, w, w)
+        Accumulated into.
+    """
+    w = B.shape[2]
+    unit = directions.shape[0] == 0
+    most = 0
+    for r in range(len(ptr) - 1):
+        most = max(most, ptr[r + 1] - ptr[r])
+    KB = np.zeros((most, 3, w))
+    JA = np.zeros((most, w))
+    pairs = np.zeros(most * most, dtype=np.int64)
+    for r in range(len(ptr) - 1):
+        q = ptr[r + 1] - ptr[r]
+        if q == 0:
+            continue
+        KB[:q] = 0.0
+        for p in range(indptr[r], indptr[r + 1]):
+            s = slot[p]
+            if s < 0:
+                continue
+            v = where[indices[p]]
+            x = data[p]
+            for c in range(3):
+                for k in range(w):
+                    KB[s, c, k] += x * B[v, c, k]
+        _pair_blocks(pairs, ptr[r], q, clusters, bptr, bcols)
+        for d in range(weights.shape[1]):
+            wr = weights[r, d]
+            if wr == 0.0:
+                continue
+            for i in range(q):
+                for k in range(w):
+                    if unit:
+                        JA[i, k] = KB[i, d, k]
+                    else:
+                        JA[i, k] = (
+                            directions[r, d, 0] * KB[i, 0, k]
+                            + directions[r, d, 1] * KB[i, 1, k]
+                            + directions[r, d, 2] * KB[i, 2, k]
+                        )
+            _add_pairs(blocks, pairs, JA, q, wr)
+
+
+@nb.njit(cache=True)
+def project_rotation(indptr, indices, values, ptr, clusters, slot, bptr, bcols, where, B, blocks):
+    """Subtract ``Σ (C_r A)ᵀ (C_r A)`` for the rotations' factor ``C`` from ``blocks``.
+
+    ``C``'s rows ``3 i + c`` hold three values per entry ``p`` of the
+    Laplacian's row ``i`` (:func:`rotation_factor`'s layout); the pattern
+    is the Laplacian's, so :func:`row_clusters` of ``L`` (stride 1) serves
+    all three rows of a vertex.
+
+    Parameters
+    ----------
+    indptr, indices : ndarray of int64
+        ``L`` in CSR form with sorted columns.
+    values : ndarray, shape (9 nnz,)
+        :func:`rotation_factor`.
+    ptr, clusters, slot, bptr, bcols, where, B, blocks
+        As :func:`project_rows`'s.
+    """
+    w = B.shape[2]
+    most = 0
+    for r in range(len(ptr) - 1):
+        most = max(most, ptr[r + 1] - ptr[r])
+    JA = np.zeros((most, w))
+    pairs = np.zeros(most * most, dtype=np.int64)
+    for r in range(len(ptr) - 1):
+        q = ptr[r + 1] - ptr[r]
+        if q == 0:
+            continue
+        _pair_blocks(pairs, ptr[r], q, clusters, bptr, bcols)
+        start, count = indptr[r], indptr[r + 1] - indptr[r]
+        for cc in range(3):
+            JA[:q] = 0.0
+            for p in range(start, indptr[r + 1]):
+                s = slot[p]
+                if s < 0:
+                    continue
+                v = where[indices[p]]
+                base = 9 * start + 3 * cc * count + 3 * (p - start)
+                for a in range(3):
+                    x = values[base + a]
+                    for k in range(w):
+                        JA[s, k] += x * B[v, a, k]
+            _add_pairs(blocks, pairs, JA, q, -1.0)
+
+
+@nb.njit(cache=True)
+def motion_rows_of(indptr, indices, data, directions, ptr, slot, where, B):
+    """The values of ``J A`` for the rows ``K_r ⊗ d`` (:func:`project_rows`'s), row-major.
+
+    Row ``r D + d`` has ``w`` entries per cluster row ``r`` of ``K``
+    touches, at columns ``w k .. w k + w − 1`` for its clusters ``k``
+    (ascending).
+
+    Parameters
+    ----------
+    indptr, indices, data, directions, ptr, slot, where, B
+        As :func:`project_rows`'s; ``directions`` of shape (r, D, 3), or
+        empty for the unit directions (``D = 3``).
 
     Returns
     -------
-    ndarray, shape (w ptr[-1],)
+    ndarray, shape (D w ptr[-1],)
     """
     w = B.shape[2]
-    out = np.zeros(w * ptr[-1])
-    rows = out.reshape((ptr[-1], w))
+    unit = directions.shape[0] == 0
+    D = 3 if unit else directions.shape[1]
+    out = np.zeros(D * w * ptr[-1])
+    at = 0
     for r in range(len(ptr) - 1):
-        _add_row_motions(rows[ptr[r] : ptr[r + 1]], r, indptr, indices, data, slot, B)
+        q = ptr[r + 1] - ptr[r]
+        for d in range(D):
+            for p in range(indptr[r], indptr[r + 1]):
+                s = slot[p]
+                if s < 0:
+                    continue
+                v = where[indices[p]]
+                for c in range(3):
+                    x = data[p] * ((1.0 if c == d else 0.0) if unit else directions[r, d, c])
+                    if x != 0.0:
+                        for k in range(w):
+                            out[at + w * s + k] += x * B[v, c, k]
+            at += w * q
+    return out
+
+
+@nb.njit(cache=True)
+def restrict(B, labels, v, a):
+    """``Aᵀ v`` for the motions ``B`` (m, 3, w) of clusters ``labels`` (m,), ``v`` (3 m,).
+
+    Returns
+    -------
+    ndarray, shape (w a,)
+    """
+    w = B.shape[2]
+    out = np.zeros(w * a)
+    for i in range(B.shape[0]):
+        base = w * labels[i]
+        for c in range(3):
+            x = v[3 * i + c]
+            for k in range(w):
+                out[base + k] += B[i, c, k] * x
+    return out
+
+
+@nb.njit(cache=True)
+def prolong(B, labels, y):
+    """``A y`` for the motions ``B`` (m, 3, w) of clusters ``labels`` (m,), ``y`` (w a,).
+
+    Returns
+    -------
+    ndarray, shape (3 m,)
+    """
+    w = B.shape[2]
+    out = np.empty(3 * B.shape[0])
+    for i in range(B.shape[0]):
+        base = w * labels[i]
+        for c in range(3):
+            x = 0.0
+            for k in range(w):
+                x += B[i, c, k] * y[base + k]
+            out[3 * i + c] = x
     return out

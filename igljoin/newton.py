@@ -42,26 +42,16 @@ from scipy.sparse import get_index_dtype
 from .linsolve import FixedQuadratic
 from .terms import ROTATION_REGULARISATION, LocalState, ShapeTerm, SmoothJoinTerm, StretchTerm
 
-__all__ = ["gauss_newton", "gauss_newton_factors", "factor_entries", "dofs", "NewtonModel"]
-
-
-def _cross(c: np.ndarray) -> np.ndarray:
-    """Cross-product matrices ``[c]×`` (k, 3, 3) of vectors ``c`` (k, 3)."""
-    out = np.zeros((len(c), 3, 3))
-    out[:, 0, 1], out[:, 0, 2] = -c[:, 2], c[:, 1]
-    out[:, 1, 0], out[:, 1, 2] = c[:, 2], -c[:, 0]
-    out[:, 2, 0], out[:, 2, 1] = -c[:, 1], c[:, 0]
-    return out
-
-
-def _inertia(c: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """``w (|c|² I − c cᵀ)`` (k, 3, 3) for vectors ``c`` (k, 3) and weights ``w`` (k,)."""
-    out = -c[:, :, None] * c[:, None, :]
-    s = np.einsum("ij,ij->i", c, c)
-    out[:, 0, 0] += s
-    out[:, 1, 1] += s
-    out[:, 2, 2] += s
-    return out * w[:, None, None]
+__all__ = [
+    "gauss_newton",
+    "gauss_newton_factors",
+    "factor_rows",
+    "rotation_pattern",
+    "row_directions",
+    "factor_entries",
+    "dofs",
+    "NewtonModel",
+]
 
 
 def _kron3(K: sp.spmatrix, H: np.ndarray | None = None, cache: dict | None = None) -> sp.csr_matrix:
@@ -102,104 +92,28 @@ def _index_arrays(cols: np.ndarray, indptr: np.ndarray, shape: tuple) -> tuple:
     return cols.astype(kind), indptr.astype(kind)
 
 
-def _shape_factors(term: ShapeTerm, state: LocalState, cache: dict | None = None) -> list:
-    n = term.n
-    base = (_kron3(term.K, cache=cache), np.repeat(term.weights, 3), 1.0)
-    if not term.rotation_aware:
-        return [base]
-    if cache is not None:
-        return [base, (_rotation_factor(term, state, cache), np.ones(3 * n), -1.0)]
-    R = state.rotations
-    w, mu = term.weight, ROTATION_REGULARISATION
-    L = sp.csr_matrix(term.L, copy=True)  # sorted below; the term keeps its own
-    L.sort_indices()
-    rows = np.repeat(np.arange(n), np.diff(L.indptr))
-    keys = rows * n + L.indices
-    # the Laplacian row of vertex i: target c = R_i δ_i, coefficient L[i, v] at v
-    c_lap = np.einsum("nij,nj->ni", R, term.delta)
-    M = (w * L.data)[:, None, None] * _cross(c_lap)[rows]
-    S = _inertia(c_lap, np.full(n, w))
-    # one-ring edge rows owned by each end: +[c]× at the owner, −[c]× at the other end
-    E = term.E
-    for own, other, sign in ((0, 1, 1.0), (1, 0, -1.0)):
-        o, t = E[:, own], E[:, other]
-        c = sign * np.einsum("eij,ej->ei", R[o], term.rest_edges)
-        X = (w * mu) * _cross(c)
-        np.add.at(M, np.searchsorted(keys, o * n + o), X)
-        np.add.at(M, np.searchsorted(keys, o * n + t), -X)
-        np.add.at(S, o, _inertia(c, np.full(len(c), w * mu)))
-    # eliminate the rotations: − Σ_i M_i S_i⁻¹ M_iᵀ = − Cᵀ C, with the rows 3 i + c of C
-    # holding (M_i Z_i)[:, c] at the coordinates of vertex i's closed one-ring (S⁻¹ = Z Zᵀ)
-    Z = np.linalg.cholesky(np.linalg.inv(S))
-    N = np.einsum("pab,pbc->pac", M, Z[rows])  # (p, coordinate a of the column vertex, c)
-    data = np.transpose(N, (0, 2, 1))  # (p, c, a)
-    r = np.broadcast_to(3 * rows[:, None, None] + np.arange(3)[None, :, None], data.shape)
-    col = np.broadcast_to(3 * L.indices[:, None, None] + np.arange(3)[None, None, :], data.shape)
-    C = sp.csr_matrix((data.ravel(), (r.ravel(), col.ravel())), shape=(3 * n, 3 * n))
-    return [base, (C, np.ones(3 * n), -1.0)]
+def _unit_rows(term, weights: np.ndarray) -> tuple:
+    """``K ⊗ I₃`` as rows: the three unit directions of every row, weights (r, 3)."""
+    weights = np.asarray(weights, dtype=np.float64)
+    return (term.K, None, np.broadcast_to(weights[:, None], (len(weights), 3)))
 
 
-def _rotation_factor(term: ShapeTerm, state: LocalState, cache: dict) -> sp.csr_matrix:
-    """The numpy reference's ``C`` from the compiled kernel, its pattern kept in ``cache``."""
-    from .coarse_kernels import rotation_factor
-
-    key = (id(term), "rotations")
-    if key not in cache:
-        n = term.n
-        L = sp.csr_matrix(term.L, copy=True)
-        L.sort_indices()
-        keys = np.repeat(np.arange(n), np.diff(L.indptr)) * n + L.indices
-        E = np.ascontiguousarray(term.E, dtype=np.int64)
-        own_own = np.stack([np.searchsorted(keys, E[:, k] * n + E[:, k]) for k in (0, 1)])
-        own_other = np.stack([np.searchsorted(keys, E[:, k] * n + E[:, 1 - k]) for k in (0, 1)])
-        count = np.diff(L.indptr)
-        # row 3 i + c: 3 entries (columns 3 v + a) per entry v of L's row i
-        indptr = np.r_[0, np.cumsum(np.repeat(3 * count, 3))].astype(np.int64)
-        rows = np.repeat(np.arange(n), count)
-        cols = np.empty(9 * L.nnz, dtype=np.int64)
-        for i_c in range(3):
-            start = (
-                9 * L.indptr[rows] + 3 * i_c * count[rows] + 3 * (np.arange(L.nnz) - L.indptr[rows])
-            )
-            for a in range(3):
-                cols[start + a] = 3 * L.indices + a
-        cols, indptr = _index_arrays(cols, indptr, (3 * n, 3 * n))
-        cache[key] = (
-            (L.indptr.astype(np.int64), L.indices.astype(np.int64), L.data),
-            E,
-            np.ascontiguousarray(term.rest_edges, dtype=np.float64),
-            np.ascontiguousarray(term.delta, dtype=np.float64),
-            own_own,
-            own_other,
-            cols,
-            indptr,
-        )
-    L, E, rest, delta, own_own, own_other, cols, indptr = cache[key]
-    R = np.ascontiguousarray(state.rotations, dtype=np.float64)
-    data = rotation_factor(
-        *L, R, delta, E, rest, own_own, own_other, float(term.weight),
-        float(ROTATION_REGULARISATION),
-    )  # fmt: skip
-    return sp.csr_matrix((data, cols, indptr), shape=(3 * term.n, 3 * term.n))
-
-
-def _stretch_factors(term: StretchTerm, state: LocalState, cache: dict | None = None) -> list:
+def _stretch_rows(term: StretchTerm, state: LocalState) -> tuple:
     d = term.applied(state)
     length = np.linalg.norm(d, axis=1)
     u = d / np.maximum(length, 1e-300)[:, None]
     across = np.clip(1.0 - term.rest_length / np.maximum(length, 1e-300), 0.0, None)
     # k (u uᵀ + s (I − u uᵀ)) = k u uᵀ + k s Σ_c p_c p_cᵀ with p_c the rows of I − u uᵀ
-    proj = np.eye(3)[None] - u[:, :, None] * u[:, None, :]
-    K = term.K
+    directions = np.empty((len(u), 4, 3))
+    directions[:, 0] = u
+    directions[:, 1:] = np.eye(3)[None] - u[:, :, None] * u[:, None, :]
     across = term.weights * across
-    return [(_kron3(K, u, cache), term.weights, 1.0)] + [
-        (_kron3(K, proj[:, c], cache), across, 1.0) for c in range(3)
-    ]
+    return (term.K, directions, np.stack([term.weights, across, across, across], 1))
 
 
-def _smooth_factors(term: SmoothJoinTerm, state: LocalState, cache: dict | None = None) -> list:
+def _smooth_rows(term: SmoothJoinTerm, state: LocalState) -> tuple:
     if term.mode == "paper":
-        return [(_kron3(term.K, cache=cache), np.repeat(term.weights, 3), 1.0)]
+        return _unit_rows(term, term.weights)
     k = term.K.shape[0]
     r = term.applied(state) - term.target(state)
     size = np.linalg.norm(r, axis=1)
@@ -209,7 +123,114 @@ def _smooth_factors(term: SmoothJoinTerm, state: LocalState, cache: dict | None 
     # a row exactly on a face: the face's normal; exactly inside a wedge: nothing
     tol = np.broadcast_to(np.asarray(term.tolerance, dtype=np.float64), (k,))
     m = np.where((~moved & (tol > 0))[:, None], 0.0, m)
-    return [(_kron3(term.K, m, cache), term.weights, 1.0)]
+    return (term.K, m[:, None, :], np.asarray(term.weights, dtype=np.float64)[:, None])
+
+
+def factor_rows(term, state: LocalState, cache: dict | None = None) -> tuple:
+    """``term``'s part of :func:`gauss_newton_factors` as rows of its operators.
+
+    Every factor row is a row ``K_r`` of the term's operator times a
+    direction ``d`` in the coordinates, ``K_r ⊗ d`` (shape (3n,)): ``K ⊗ I₃``
+    is every row with the three unit directions, the stretch term's four
+    factors the direction of the edge and the rows of ``I − u uᵀ``, the
+    smooth join's one factor the unit residual. The eliminated rotations of
+    a rotation-aware shape term, the factor with the minus sign, are
+    returned as the values of its blocks (:func:`rotation_pattern`).
+
+    Parameters
+    ----------
+    term : Term
+    state : LocalState
+        A local step's state (n, 3), with ``rotations`` fitted.
+    cache : dict, optional
+        As :func:`gauss_newton_factors`'s (the rotations' kernel inputs).
+
+    Returns
+    -------
+    rows : list of (scipy.sparse matrix, ndarray or None, ndarray)
+        ``(K, directions, weights)``: ``K`` of shape (r, n); ``directions``
+        of shape (r, D, 3), or ``None`` for the three unit directions
+        (``D = 3``); ``weights`` of shape (r, D), ≥ 0, row ``K_r ⊗ d``'s
+        weight at ``[r, d]``. Their sign is +1.
+    rotation : ndarray, shape (9 p,), or None
+        The values of ``C`` (``Σ_i M_i S_i⁻¹ M_iᵀ = CᵀC``, sign −1, unit
+        weights) for a rotation-aware shape term, ``p`` the entries of its
+        Laplacian: :func:`igljoin.coarse_kernels.rotation_factor`'s layout.
+    """
+    if isinstance(term, ShapeTerm):
+        rotation = _rotation_values(term, state, {} if cache is None else cache)
+        return [_unit_rows(term, term.weights)], (rotation if term.rotation_aware else None)
+    if isinstance(term, StretchTerm):
+        return [_stretch_rows(term, state)], None
+    if isinstance(term, SmoothJoinTerm):
+        return [_smooth_rows(term, state)], None
+    return [_unit_rows(term, term.weights)], None
+
+
+def rotation_pattern(term: ShapeTerm, cache: dict) -> tuple:
+    """The rotations' kernel inputs for a rotation-aware ``term``, kept in ``cache``.
+
+    Returns
+    -------
+    tuple
+        ``((indptr, indices, data), E, rest, delta, own_own, own_other)``:
+        the Laplacian ``L`` in CSR form with sorted columns (int64 indices;
+        the rows of ``C`` are ``3 i + c`` for its rows ``i``, their entries
+        three per entry of ``L``) and the arguments of
+        :func:`igljoin.coarse_kernels.rotation_factor` that do not change.
+    """
+    key = (id(term), "rotations")
+    if key not in cache:
+        n = term.n
+        L = sp.csr_matrix(term.L, copy=True)
+        L.sort_indices()
+        keys = np.repeat(np.arange(n), np.diff(L.indptr)) * n + L.indices
+        E = np.ascontiguousarray(term.E, dtype=np.int64)
+        own_own = np.stack([np.searchsorted(keys, E[:, k] * n + E[:, k]) for k in (0, 1)])
+        own_other = np.stack([np.searchsorted(keys, E[:, k] * n + E[:, 1 - k]) for k in (0, 1)])
+        cache[key] = (
+            (L.indptr.astype(np.int64), L.indices.astype(np.int64), L.data),
+            E,
+            np.ascontiguousarray(term.rest_edges, dtype=np.float64),
+            np.ascontiguousarray(term.delta, dtype=np.float64),
+            own_own,
+            own_other,
+        )
+    return cache[key]
+
+
+def _rotation_values(term: ShapeTerm, state: LocalState, cache: dict) -> np.ndarray | None:
+    """The values of the rotations' elimination factor ``C`` (compiled), or None."""
+    if not term.rotation_aware:
+        return None
+    from .coarse_kernels import rotation_factor
+
+    L, E, rest, delta, own_own, own_other = rotation_pattern(term, cache)
+    R = np.ascontiguousarray(state.rotations, dtype=np.float64)
+    return rotation_factor(
+        *L, R, delta, E, rest, own_own, own_other, float(term.weight),
+        float(ROTATION_REGULARISATION),
+    )  # fmt: skip
+
+
+def _rotation_matrix(term: ShapeTerm, values: np.ndarray, cache: dict) -> sp.csr_matrix:
+    """``C`` of shape (3n, 3n) from its values, its index arrays kept in ``cache``."""
+    key = (id(term), "rotation matrix")
+    if key not in cache:
+        (Lptr, Lind, _), *_ = rotation_pattern(term, cache)
+        n, nnz = term.n, len(Lind)
+        count = np.diff(Lptr)
+        # row 3 i + c: 3 entries (columns 3 v + a) per entry v of L's row i
+        indptr = np.r_[0, np.cumsum(np.repeat(3 * count, 3))].astype(np.int64)
+        rows = np.repeat(np.arange(n), count)
+        cols = np.empty(9 * nnz, dtype=np.int64)
+        for i_c in range(3):
+            start = 9 * Lptr[rows] + 3 * i_c * count[rows] + 3 * (np.arange(nnz) - Lptr[rows])
+            for a in range(3):
+                cols[start + a] = 3 * Lind + a
+        cache[key] = _index_arrays(cols, indptr, (3 * n, 3 * n))
+    cols, indptr = cache[key]
+    return sp.csr_matrix((values, cols, indptr), shape=(3 * term.n, 3 * term.n))
 
 
 def gauss_newton_factors(terms: list, state: LocalState, n: int, cache: dict | None = None) -> list:
@@ -219,6 +240,7 @@ def gauss_newton_factors(terms: list, state: LocalState, n: int, cache: dict | N
     row of the smooth join couples ~50 vertices: 150 entries in ``J``,
     22,500 in ``JᵀJ``); products with it and projections ``(J A)ᵀ W (J A)``
     onto a few columns ``A`` are cheap where the assembled matrix is not.
+    :func:`factor_rows` gives the same factors without forming ``J``.
 
     Parameters
     ----------
@@ -228,11 +250,9 @@ def gauss_newton_factors(terms: list, state: LocalState, n: int, cache: dict | N
     n : int
         Number of vertices.
     cache : dict, optional
-        Kept by a caller that asks again for the same terms (the two-level
-        model's rebuilds): the factors' patterns are stored in it on the
-        first call, and later calls compute their values only (the
-        rotations' factor with a compiled kernel). The same matrices as
-        without it, to rounding.
+        Kept by a caller that asks again for the same terms: the factors'
+        patterns are stored in it on the first call, and later calls
+        compute their values only. The same matrices as without it.
 
     Returns
     -------
@@ -241,17 +261,42 @@ def gauss_newton_factors(terms: list, state: LocalState, n: int, cache: dict | N
         weights ``w`` (r,) ≥ 0 and the sign ``s`` (−1 for the eliminated
         rotations).
     """
+    cache = {} if cache is None else cache
     parts = []
     for term in terms:
-        if isinstance(term, ShapeTerm):
-            parts += _shape_factors(term, state, cache)
-        elif isinstance(term, StretchTerm):
-            parts += _stretch_factors(term, state, cache)
-        elif isinstance(term, SmoothJoinTerm):
-            parts += _smooth_factors(term, state, cache)
-        else:
-            parts.append((_kron3(term.K, cache=cache), np.repeat(term.weights, 3), 1.0))
+        rows, rotation = factor_rows(term, state, cache)
+        for K, directions, weights in rows:
+            if directions is None:
+                parts.append((_kron3(K, cache=cache), weights.reshape(-1), 1.0))
+                continue
+            parts += [
+                (_kron3(K, directions[:, d], cache), weights[:, d], 1.0)
+                for d in range(directions.shape[1])
+            ]
+        if rotation is not None:
+            parts.append((_rotation_matrix(term, rotation, cache), np.ones(3 * term.n), -1.0))
     return parts
+
+
+def _unit_directions(term) -> bool:
+    """Whether :func:`factor_rows` gives ``term``'s rows the unit directions (``K ⊗ I₃``)."""
+    if isinstance(term, StretchTerm):
+        return False
+    return not (isinstance(term, SmoothJoinTerm) and term.mode != "paper")
+
+
+def row_directions(term) -> int:
+    """Factor rows per row of ``term``'s operator ``K`` (:func:`factor_rows`' ``D``).
+
+    Four for the stretch term, one for the smooth join's projections, three
+    (``K ⊗ I₃``) otherwise; a rotation-aware shape term's eliminated
+    rotations are counted by :func:`factor_entries` apart.
+    """
+    if isinstance(term, StretchTerm):
+        return 4
+    if isinstance(term, SmoothJoinTerm) and term.mode != "paper":
+        return 1
+    return 3
 
 
 def factor_entries(term) -> int:
@@ -271,11 +316,11 @@ def factor_entries(term) -> int:
     int
     """
     nnz = sp.csr_matrix(term.K).nnz
-    if isinstance(term, StretchTerm):
-        return 4 * 3 * nnz
+    # K ⊗ I₃ holds one entry per entry of K in each of its three rows, K_r ⊗ d three
+    nnz *= 3 if _unit_directions(term) else 3 * row_directions(term)
     if isinstance(term, ShapeTerm) and term.rotation_aware:
-        return 3 * nnz + 9 * sp.csr_matrix(term.L).nnz
-    return 3 * nnz
+        return nnz + 9 * sp.csr_matrix(term.L).nnz
+    return nnz
 
 
 def gauss_newton(terms: list, state: LocalState, n: int) -> sp.csr_matrix:

@@ -15,8 +15,9 @@ motions — three translations and three infinitesimal rotations about its
 centroid at the current positions (:func:`rigid_prolongation`) — and three
 bending motions (:func:`bending_prolongation`; ``A`` of shape (3 m, 9 a)).
 The coarse matrix ``A_c = Aᵀ H A`` is the model ``H`` projected onto them,
-computed from the model's factored form
-(:func:`igljoin.newton.gauss_newton_factors`) without assembling ``H``, and
+computed from the model's factor rows on the terms' operators
+(:func:`igljoin.newton.factor_rows`) without assembling ``H`` or forming
+its factors, and
 factored (9 a unknowns, a few thousand); both are rebuilt at the current
 iterate when the guest has turned far from where they were built (the
 values only: the patterns are the first build's; the coarse system is then
@@ -41,9 +42,22 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from . import coarse_kernels as ck
-from .errors import OptionsError
-from .linsolve import AugmentedQuadratic, FixedQuadratic, available_backends
-from .newton import dofs, factor_entries, gauss_newton_factors
+from .errors import OptionsError, SolveError
+from .linsolve import (
+    AugmentedQuadratic,
+    FixedQuadratic,
+    _Pardiso,
+    _PardisoError,
+    available_backends,
+)
+from .newton import (
+    dofs,
+    factor_entries,
+    factor_rows,
+    gauss_newton_factors,
+    rotation_pattern,
+    row_directions,
+)
 from .terms import ShapeTerm
 
 __all__ = [
@@ -63,17 +77,20 @@ __all__ = [
 _RIDGE = 1e-10
 
 #: Largest number of entries the model may hold (:attr:`TwoLevelModel.model_entries`: the
-#: factors of the Gauss–Newton model, :func:`igljoin.newton.factor_entries`, and the coarse
-#: system, :attr:`TwoLevelModel.coarse_entries`), counted from the patterns before any of it
-#: is built. Measured on tubes with Pardiso, the first build peaks 36-39 bytes per entry
-#: above the solver's own memory (100k guest vertices: 26.7 M entries, 0.97 GB; 300k:
-#: 87 M, 3.4 GB; the 1M tube counts 340 M, ~13 GB over the solver's 8 GB: its build was
-#: stopped at 16 GB in all); 2e8 entries are ~7.5 GB. Past it ``preconditioner="auto"``
-#: keeps the factored ``P`` and ``"two-level"`` is refused.
-MAX_MODEL_ENTRIES = 200_000_000
+#: coarse system, :attr:`TwoLevelModel.coarse_entries`, the operators' cluster patterns and
+#: the free vertices' motions; the balancing form adds the Gauss–Newton model's factors,
+#: :func:`igljoin.newton.factor_entries`), counted from the patterns before any of it is
+#: built. Measured with Pardiso, the first build peaks 36-40 bytes per entry above the
+#: solver's own memory, most of it the coarse factorization (100k patch: 11.0 M entries,
+#: 0.39 GB; 300k tube: 34 M, 1.35 GB); the 1M tube counts 131 M, and its join went from
+#: 7.8 GB after the set-up to 14.8 GB at the first build (at most 53 bytes per entry, with
+#: copies of the coarse system since dropped). A rebuild lets the last factorization go
+#: first and adds a fifth of that. 1.6e8 entries are about 8 GB. Past it
+#: ``preconditioner="auto"`` keeps the factored ``P`` and ``"two-level"`` is refused.
+MAX_MODEL_ENTRIES = 160_000_000
 
-#: Bytes a first build spends per counted entry (the upper end of the 36-39 measured above).
-_BYTES_PER_ENTRY = 39
+#: Bytes a first build spends per counted entry (the 36-53 measured above, rounded up).
+_BYTES_PER_ENTRY = 50
 
 # a term whose rows reach this many clusters on average (the smooth join's band rows:
 # 82 at 100k guest vertices, 222 at 300k) is kept as rows of J A beside A_c's local part
@@ -83,13 +100,64 @@ _WIDE_CLUSTERS = 8
 
 
 class _CoarseAugmented(AugmentedQuadratic):
-    """The augmented factorization of ``A_c = S + Uᵀ W U``, checked at ``A_c``'s accuracy."""
+    """The augmented factorization of ``A_c = S + Uᵀ W U``, checked at ``A_c``'s accuracy.
+
+    :class:`igljoin.linsolve.AugmentedQuadratic` without fixed rows, made
+    from the build's own parts: ``S`` and ``U`` are kept as given (not
+    copied into free blocks), ``Uᵀ`` is their transposed view, and Pardiso
+    is handed the augmented matrix's upper triangle directly (not the whole
+    matrix to cut it from) — at 300k guest vertices the copies and the
+    assembled block matrix had cost half as much again as the factorization.
+    """
 
     #: the ridge of 1e-10 leaves ``A_c`` a condition number up to ~1e10, so a sound
     #: factorization may leave a probe residual up to ~1e10 × 2.2e-16 ≈ 2e-6 (measured
     #: 1.6e-8 on a 100k tube, as the assembled ``A_c``'s own factorization leaves); a
     #: singular system whose zero pivots were perturbed leaves one of order 1
     PROBE_RESIDUAL = 1e-4
+
+    def __init__(self, S: sp.csr_matrix, U: sp.csr_matrix, weights: np.ndarray):
+        n, weights = S.shape[0], np.asarray(weights, dtype=np.float64)
+        self.n, self.fixed, self.free = n, np.zeros(0, dtype=np.int64), np.arange(n)
+        self.backend = "pardiso"
+        keep = np.flatnonzero(weights > 0.0)
+        self.Sff = S
+        self.Kf = U if len(keep) == U.shape[0] else sp.csr_matrix(U[keep])
+        self.Kft = self.Kf.T
+        self.cw = weights[keep]
+        self.Sfb, self.Kb = sp.csr_matrix((n, 0)), sp.csr_matrix((len(keep), 0))
+        if not n:
+            return
+        FixedQuadratic.made += 1
+        # [[S, Uᵀ], [U, −W⁻¹]]'s upper triangle: S's, Uᵀ beside it, the diagonal below
+        rows = np.repeat(np.arange(n), np.diff(S.indptr))
+        upper = S.indices >= rows
+        r = np.arange(len(keep))
+        at = np.repeat(r, np.diff(self.Kf.indptr))
+        A = sp.coo_matrix(
+            (
+                np.r_[S.data[upper], self.Kf.data, -1.0 / self.cw],
+                (
+                    np.r_[rows[upper], self.Kf.indices, n + r],
+                    np.r_[S.indices[upper], n + at, n + r],
+                ),
+            ),
+            shape=(n + len(keep), n + len(keep)),
+        )
+        del rows, upper, at
+        try:
+            self._pardiso = _Pardiso(A, indefinite=True)
+        except _PardisoError as exc:
+            raise SolveError(
+                f"{exc}; the coarse system could not be factored: use preconditioner='factored'"
+            ) from exc
+        probe = np.ones((n, 1))
+        x = self.solve_free(probe)
+        if not np.isfinite(x).all() or self.residual(x, probe) > self.PROBE_RESIDUAL:
+            raise SolveError(
+                f"the coarse system could not be factored ({self._pardiso.perturbed} pivots "
+                "of its augmented system were perturbed): use preconditioner='factored'"
+            )
 
 
 def clusters(X: np.ndarray, graph: sp.spmatrix, size: int) -> np.ndarray:
@@ -126,9 +194,7 @@ def clusters(X: np.ndarray, graph: sp.spmatrix, size: int) -> np.ndarray:
     for _ in range(8):
         # a surface fills few cells of a volume grid: shrink the cell until they hold
         # about size vertices (the count per cell scales with the cell's area)
-        keys = np.floor((X - lo) / h).astype(np.int64)
-        _, cell = np.unique(keys, axis=0, return_inverse=True)
-        cell = cell.ravel()
+        cell = _grid_cells(np.floor((X - lo) / h).astype(np.int64))
         ratio = m / (int(cell.max()) + 1) / size
         if 0.7 < ratio < 1.4:
             break
@@ -149,6 +215,19 @@ def clusters(X: np.ndarray, graph: sp.spmatrix, size: int) -> np.ndarray:
         source[lost] = m + part
     _, labels = np.unique(source, return_inverse=True)
     return labels.astype(np.int64).ravel()
+
+
+def _grid_cells(keys: np.ndarray) -> np.ndarray:
+    """The cell of every vertex (m,) from its grid coordinates (m, 3) ≥ 0, numbered as
+    ``np.unique(keys, axis=0)`` numbers them (ascending x, then y, then z)."""
+    span = keys.max(axis=0) + 1
+    if float(np.prod(span.astype(np.float64))) < 2.0**62:
+        # one integer per cell, ordered as its row: the same numbers for a tenth of the sort
+        flat = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
+        _, cell = np.unique(flat, return_inverse=True)
+    else:
+        _, cell = np.unique(keys, axis=0, return_inverse=True)
+    return cell.ravel()
 
 
 def rigid_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
@@ -205,6 +284,20 @@ def _cluster_columns(blocks: np.ndarray, labels: np.ndarray, a: int) -> sp.csr_m
     return sp.csr_matrix(
         (np.ascontiguousarray(blocks).ravel(), cols.ravel(), indptr), shape=(3 * m, w * a)
     )
+
+
+def _motion_matrix(values, ptr, members, D: int, w: int, a: int) -> sp.csr_matrix:
+    """The rows ``J A`` of :func:`igljoin.coarse_kernels.motion_rows_of`, shape (D r, w a).
+
+    Row ``r D + d`` holds ``w`` entries per cluster of ``members[ptr[r]:ptr[r + 1]]``.
+    """
+    q = np.diff(ptr)
+    indptr = np.r_[0, np.cumsum(np.repeat(w * q, D))].astype(np.int64)
+    # the columns of every row of K (w per cluster), repeated for each of its D rows
+    per_row = (w * members[:, None] + np.arange(w)[None, :]).ravel()
+    start = np.repeat(w * ptr[:-1], D)
+    cols = np.arange(indptr[-1]) - np.repeat(indptr[:-1] - start, np.diff(indptr))
+    return sp.csr_matrix((values, per_row[cols], indptr), shape=(D * len(q), w * a))
 
 
 def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
@@ -283,9 +376,9 @@ class TwoLevelModel:
     grow on the patch (35 / 30 / 41 / 55 at 10k / 20k / 40k / 100k against
     100 / 134 / 228 / 248), and on the tube they grow more slowly (73 / 162 /
     203 / 230 against 199 / 342 / 486 / 746). A rebuild computes
-    values only — the patterns of the factors and of ``A_c`` are the first
-    build's — and factors ``A_c`` anew: about 0.5 s at 40k guest vertices
-    with the band rows kept apart (below; 2 s at 100k, 8 s at 300k). Rebuilds in the
+    values only — the operators' cluster patterns and ``A_c``'s are the
+    first build's — and factors ``A_c`` anew: about 1 s at 100k guest
+    vertices with the band rows kept apart (below; 4 s at 300k). Rebuilds in the
     first iterations, while the guest still moves far, led the paper's
     longer patch (compressed into its hole) to another stationary point 1 %
     higher in energy;
@@ -299,11 +392,17 @@ class TwoLevelModel:
     cluster it reaches) are kept beside the rest ``S`` of ``A_c`` and the
     augmented system ``[[S, (J A)ᵀ], [J A, −W⁻¹]]`` is factored instead
     (:class:`igljoin.linsolve.AugmentedQuadratic`): the same ``A_c⁻¹``,
-    without the dense block. Before anything is built, the entries the coarse
-    system and the model's factors will hold are counted
-    (:attr:`model_entries`); above :data:`MAX_MODEL_ENTRIES` the model is
-    refused (an ``OptionsError``) or, with ``fall_back``, stays the factored
-    ``P`` (:attr:`fallback` says why).
+    without the dense block. Before anything is built, the entries the model
+    will hold are counted (:attr:`model_entries`); above
+    :data:`MAX_MODEL_ENTRIES` the model is refused (an ``OptionsError``) or,
+    with ``fall_back``, stays the factored ``P`` (:attr:`fallback` says why).
+
+    What a build keeps: the coarse system and its factorization, the
+    operators' cluster patterns and every free vertex's motions
+    (:attr:`motions`; ``A`` and ``Aᵀ`` are applied from them). The
+    Gauss–Newton model's factors are never formed for the additive form; the
+    balancing form keeps them (:attr:`factors`) for its products with ``H``.
+    A rebuild lets the last factorization go before it makes the next.
 
     Parameters
     ----------
@@ -343,13 +442,21 @@ class TwoLevelModel:
     built_at : list of int
         Iteration of every build.
     seconds : dict
-        ``clusters``, ``model`` (the factored Gauss–Newton model), ``coarse``
+        ``clusters``, ``model`` (the Gauss–Newton model's values), ``coarse``
         (``Aᵀ H A``) and ``factor`` times, summed over the builds.
     coarse_entries : int or None
         Entries of the coarse system counted at the first refresh (an upper
-        bound with band rows kept apart).
+        bound with band rows kept apart: their rows of zero weight are left
+        out of the factorization).
     model_entries : int or None
-        Those and the Gauss–Newton model's factors' entries.
+        Those, one per entry of the terms' operators (their cluster
+        patterns), ``3 w`` per free vertex (its motions) and, for the
+        balancing form, the Gauss–Newton model's factors' entries.
+    motions : ndarray, shape (n_free, 3, w), or None
+        Every free vertex's rows of ``A`` (:attr:`A` assembles them), ``w``
+        = 6, or 9 with ``bending``.
+    factors : list or None
+        The balancing form's :func:`igljoin.newton.gauss_newton_factors`.
     fallback : str or None
         Why the coarse correction was not built (``fall_back`` and too many
         entries): the model is then ``P⁻¹`` alone; ``None`` otherwise.
@@ -381,13 +488,20 @@ class TwoLevelModel:
         self.free_dofs = dofs(solver.free)
         self.labels = None
         self._cache = {}
-        # set at the first build: the free vertices' clusters by vertex (-1 fixed), which
-        # terms are kept apart, per factor whether it is a wide term's, the patterns found
+        # set at the first build: the free vertices' clusters by vertex (-1 fixed) and their
+        # rows in the motions, per term its operators' cluster patterns and whether it is
+        # kept apart, the blocks of A_c; at every build the motions (n_free, 3, w)
         self._vertex_labels = None
+        self._where = None
         self._wide = None
-        self._factor_wide = None
-        self._pattern = None
+        self._patterns = None
+        self._blocks = None
+        self._clusters = None
+        self.motions = None
+        self.factors = None
+        self._model_seconds = 0.0
         self.built_rotations = None
+        self.coarse_factor = None
         self.factorizations = 0
         self.seconds = {"clusters": 0.0, "model": 0.0, "coarse": 0.0, "factor": 0.0}
 
@@ -429,7 +543,10 @@ class TwoLevelModel:
             self.labels = clusters(X, graph, self.cluster_size)
             self._vertex_labels = np.full(ls.n, -1, dtype=np.int64)
             self._vertex_labels[ls.free] = self.labels
-            self._wide = self._count(int(self.labels.max()) + 1, 9 if self.bending else 6)
+            self._where = np.full(ls.n, -1, dtype=np.int64)
+            self._where[ls.free] = np.arange(len(ls.free))
+            self._clusters = int(self.labels.max()) + 1
+            self._wide = self._count(self._clusters, 9 if self.bending else 6)
             if self.model_entries > MAX_MODEL_ENTRIES:
                 self.seconds["clusters"] += time.perf_counter() - t0
                 message = self._too_large()
@@ -438,19 +555,18 @@ class TwoLevelModel:
                 self.fallback = message
                 return False
         t1 = time.perf_counter()
-        self.factors, self._factor_wide = [], []
-        for term, wide in zip(ls.terms, self._wide):
-            part = gauss_newton_factors([term], state, ls.n, self._cache)
-            self.factors += part
-            self._factor_wide += [wide] * len(part)
-        t2 = time.perf_counter()
+        # a rebuild lets the last factorization go first: the two together are the
+        # build's peak (a 1M tube's coarse factorization holds ~5 GB)
+        self.coarse_factor = self.factors = None
         blocks = _rigid_blocks(X, self.labels)
         if self.bending:
             blocks = np.concatenate([blocks, _bending_blocks(X, self.labels)], axis=2)
-        a = int(self.labels.max()) + 1
-        self.A = _cluster_columns(blocks, self.labels, a)
-        self.At = sp.csr_matrix(self.A.T)
-        coarse = self._project(blocks, a)
+        self.motions = np.ascontiguousarray(blocks)
+        del blocks
+        if self.balancing:
+            # the balancing form's products with H need the factors themselves
+            self.factors = gauss_newton_factors(ls.terms, state, ls.n, self._cache)
+        coarse = self._project(state)
         t3 = time.perf_counter()
         self.coarse_factor = self._factor(*coarse)
         self.factorizations += 1
@@ -458,8 +574,11 @@ class TwoLevelModel:
         if state.rotations is not None:
             self.built_rotations = state.rotations[ls.free].copy()
         t4 = time.perf_counter()
-        for key, dt in zip(self.seconds, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
-            self.seconds[key] += dt
+        self.seconds["clusters"] += t1 - t0
+        # _project splits its time between the model's values and the projection
+        self.seconds["coarse"] += t3 - t1 - self._model_seconds
+        self.seconds["model"] += self._model_seconds
+        self.seconds["factor"] += t4 - t3
         return first
 
     def _augmented(self) -> bool:
@@ -468,13 +587,16 @@ class TwoLevelModel:
         return ls.linear_solver in ("auto", "pardiso") and "pardiso" in available_backends()
 
     def _count(self, a: int, w: int) -> list:
-        """Which terms are wide; sets the entries counted from the terms' patterns.
+        """Which terms are wide; finds the patterns and counts the entries the model will hold.
 
-        Only the operators' patterns and the clusters are read: ``A_c``'s
-        local blocks are those of ``Tᵀ T`` for the clusters' incidence ``T``
-        of the local rows (:func:`igljoin.coarse_kernels.block_pattern`),
-        ``w²`` entries each; a wide term adds ``w`` entries per cluster each
-        of its rows reaches, times 3 (at most three factor rows per row).
+        Only the operators' patterns and the clusters are read: every row of a
+        term's operator ``K`` (and of the Laplacian ``L`` of a rotation-aware
+        shape term) reaches some clusters (:func:`igljoin.coarse_kernels.row_clusters`,
+        kept for the projections); ``A_c``'s local blocks are those of
+        ``Tᵀ T`` for the clusters' incidence ``T`` of the local rows
+        (:func:`igljoin.coarse_kernels.block_pattern`), ``w²`` entries each;
+        a wide term adds ``w`` entries per cluster each of its factor rows
+        reaches (:func:`igljoin.newton.row_directions` rows per row of ``K``).
 
         Returns
         -------
@@ -482,14 +604,19 @@ class TwoLevelModel:
             Per term of the solver: kept as rows of ``J A``.
         """
         augmented = self._augmented()
-        local, wide, wide_entries = [], [], 0
+        local, wide, wide_entries, operators = [], [], 0, 0
+        self._patterns = []
         for term in self.solver.terms:
-            patterns = [sp.csr_matrix(term.K)]
+            K = sp.csr_matrix(term.K)
+            of_K = ck.row_clusters(K.indptr, K.indices, self._vertex_labels, 1)
+            of_L = None
+            reach, count = len(of_K[1]), K.shape[0]
+            operators += K.nnz
             if isinstance(term, ShapeTerm) and term.rotation_aware:
-                patterns.append(sp.csr_matrix(term.L))
-            rows = [ck.row_clusters(P.indptr, P.indices, self._vertex_labels, 1) for P in patterns]
-            reach = sum(len(r[1]) for r in rows)
-            count = sum(P.shape[0] for P in patterns)
+                (Lptr, Lind, _), *_ = rotation_pattern(term, self._cache)
+                of_L = ck.row_clusters(Lptr, Lind, self._vertex_labels, 1)
+                reach, count = reach + len(of_L[1]), count + len(Lptr) - 1
+                operators += len(Lind)
             # the eliminated rotations' factor enters with a minus sign: never kept apart
             keep_apart = (
                 augmented
@@ -498,12 +625,18 @@ class TwoLevelModel:
             )
             wide.append(bool(keep_apart))
             if keep_apart:
-                wide_entries += 3 * w * reach
+                wide_entries += row_directions(term) * w * reach
             else:
-                local += [(ptr, members) for ptr, members, _ in rows]
-        blocks = len(ck.block_pattern(local, a)[1])
-        self.coarse_entries = int(w * w * blocks + wide_entries)
-        self.model_entries = self.coarse_entries + sum(factor_entries(t) for t in self.solver.terms)
+                local += [p[:2] for p in (of_K, of_L) if p is not None]
+            self._patterns.append((K, of_K, of_L))
+        self._blocks = ck.block_pattern(local, a)
+        self.coarse_entries = int(w * w * len(self._blocks[1]) + wide_entries)
+        # besides the coarse system: the operators' cluster patterns, every free vertex's
+        # motions and, for the balancing form, the factors themselves
+        held = operators + 3 * w * len(self.labels)
+        if self.balancing:
+            held += sum(factor_entries(t) for t in self.solver.terms)
+        self.model_entries = self.coarse_entries + held
         return wide
 
     def _too_large(self) -> str:
@@ -547,18 +680,20 @@ class TwoLevelModel:
         """
         ls = self.solver
         if U is not None:
-            return _CoarseAugmented(Ac, U, weights, 1.0, np.zeros(0, dtype=np.int64))
+            return _CoarseAugmented(Ac, U, weights)
         backend = "pardiso" if self._augmented() else ls.linear_solver
         return FixedQuadratic(Ac, np.zeros(0, dtype=np.int64), backend)
 
-    def _project(self, blocks: np.ndarray, a: int) -> tuple:
-        """``A_c = Aᵀ H A`` from the factors, plus the ridge; shape (w a, w a).
+    def _project(self, state) -> tuple:
+        """``A_c = Aᵀ H A`` from the terms' factor rows, plus the ridge; shape (w a, w a).
 
-        The patterns of the factors and of ``A_c`` are found at the first
-        build (and again only if a factor's pattern changed); a rebuild
-        recomputes values only (:func:`igljoin.coarse_kernels.project`).
-        The wide terms' factors are not projected but kept as rows ``J A``
-        (:func:`igljoin.coarse_kernels.motion_rows`).
+        Term after term, the model's values at ``state``
+        (:func:`igljoin.newton.factor_rows`) are projected onto the motions
+        without forming the factors ``J``
+        (:func:`igljoin.coarse_kernels.project_rows`,
+        :func:`igljoin.coarse_kernels.project_rotation`), on the patterns
+        found at the first build. The wide terms' rows are not projected but
+        kept as rows ``J A`` (:func:`igljoin.coarse_kernels.motion_rows_of`).
 
         Returns
         -------
@@ -568,53 +703,45 @@ class TwoLevelModel:
             The wide terms' rows ``J A``.
         weights : ndarray, shape (rows,), or None
         """
-        mats = [sp.csr_matrix(J) for J, _, _ in self.factors]
-        pattern = self._pattern
-        same = pattern is not None and len(pattern[0]) == len(mats)
-        # the cached factors share their index arrays from build to build: no copies kept
-        same = same and all(
-            (J.indptr is p or np.array_equal(J.indptr, p))
-            and (J.indices is i or np.array_equal(J.indices, i))
-            for J, p, i in zip(mats, pattern[0], pattern[1])
-        )
-        if not same:
-            # per factor: the clusters each row reaches; the blocks of A_c are the cluster
-            # pairs some local row reaches
-            rows = [ck.row_clusters(J.indptr, J.indices, self._vertex_labels) for J in mats]
-            local = [(r[0], r[1]) for r, wide in zip(rows, self._factor_wide) if not wide]
-            self._pattern = (
-                [J.indptr for J in mats],
-                [J.indices for J in mats],
-                rows,
-                ck.block_pattern(local, a),
-            )
-        bptr, bcols, lower, upper = self._pattern[3]
-        w = blocks.shape[2]
-        B = np.zeros((self.solver.n, 3, w))
-        B[self.solver.free] = blocks
+        ls = self.solver
+        a = self._clusters
+        B = self.motions
+        w = B.shape[2]
+        where = self._where
+        bptr, bcols, lower, upper = self._blocks
         out = np.zeros((len(bcols), w, w))
         wide_rows, wide_weights = [], []
-        for J, (_, wf, sign), (ptr, members, slot), wide in zip(
-            mats, self.factors, self._pattern[2], self._factor_wide
-        ):
-            weights = sign * np.asarray(wf, dtype=np.float64)
-            if wide:
-                values = ck.motion_rows(J.indptr, J.indices, J.data, ptr, slot, B)
-                cols = (w * members[:, None] + np.arange(w)[None, :]).ravel()
-                wide_rows.append(
-                    sp.csr_matrix((values, cols, w * ptr), shape=(len(ptr) - 1, w * a))
+        self._model_seconds = 0.0
+        for term, (K, of_K, of_L), wide in zip(ls.terms, self._patterns, self._wide):
+            t0 = time.perf_counter()
+            rows, rotation = factor_rows(term, state, self._cache)
+            self._model_seconds += time.perf_counter() - t0
+            for _, directions, weights in rows:
+                weights = np.ascontiguousarray(weights, dtype=np.float64)
+                directions = (
+                    np.zeros((0, 3, 3))
+                    if directions is None
+                    else np.ascontiguousarray(directions, dtype=np.float64)
                 )
-                wide_weights.append(weights)
-                continue
-            ck.project(
-                J.indptr, J.indices, J.data, weights, ptr, members, slot, bptr, bcols, B, out
-            )
+                args = (K.indptr, K.indices, K.data, directions)
+                if wide:
+                    values = ck.motion_rows_of(*args, of_K[0], of_K[2], where, B)
+                    wide_rows.append(
+                        _motion_matrix(values, of_K[0], of_K[1], weights.shape[1], w, a)
+                    )
+                    wide_weights.append(weights.ravel())
+                    continue
+                ck.project_rows(*args, weights, *of_K, bptr, bcols, where, B, out)
+            if rotation is not None:
+                (Lptr, Lind, _), *_ = rotation_pattern(term, self._cache)
+                ck.project_rotation(Lptr, Lind, rotation, *of_L, bptr, bcols, where, B, out)
         out[lower] = out[upper].transpose(0, 2, 1)
         Ac = sp.bsr_matrix((out, bcols, bptr), shape=(w * a, w * a)).tocsr()
+        del out
         diagonal = Ac.diagonal()
         U = weights = None
         if wide_rows:
-            U = sp.csr_matrix(sp.vstack(wide_rows, format="csr"))
+            U = wide_rows[0] if len(wide_rows) == 1 else sp.vstack(wide_rows, format="csr")
             weights = np.concatenate(wide_weights)
             # the diagonal of Uᵀ W U: the ridge is relative to the whole A_c's
             diagonal = diagonal + np.bincount(
@@ -625,9 +752,20 @@ class TwoLevelModel:
         Ac.setdiag(Ac.diagonal() + _RIDGE * diagonal.mean())
         return Ac, U, weights
 
+    @property
+    def A(self) -> sp.csr_matrix:
+        """The clusters' motions ``A`` assembled, shape (3 n_free, w a) — for checks.
+
+        The model keeps them as :attr:`motions` (n_free, 3, w) and applies
+        ``A`` and ``Aᵀ`` from there.
+        """
+        return _cluster_columns(self.motions, self.labels, self._clusters)
+
     def _coarse(self, v: np.ndarray) -> np.ndarray:
         """``A A_c⁻¹ Aᵀ v`` for ``v`` of shape (3 n_free,)."""
-        return self.A @ self.coarse_factor.solve_free((self.At @ v)[:, None])[:, 0]
+        B, labels = self.motions, self.labels
+        coarse = ck.restrict(B, labels, v, self._clusters)
+        return ck.prolong(B, labels, self.coarse_factor.solve_free(coarse[:, None])[:, 0])
 
     def _model(self, v: np.ndarray) -> np.ndarray:
         """``H_ff v`` for ``v`` of shape (3 n_free,), from the factored model."""

@@ -196,14 +196,16 @@ def pcg(kind: str, sizes: list) -> None:
 
         b = np.random.default_rng(0).standard_normal(3 * nf)
         out = []
-        H = None
+        # the balancing form keeps the model's factors: its products with H serve here
+        H = twolevel.TwoLevelModel(ls, balancing=True)
+        H.refresh(state, 1)
+        H = H._model
         for name, kw in {
             "rigid": dict(bending=False),
             "rigid and bending": dict(bending=True),
         }.items():
             model = twolevel.TwoLevelModel(ls, **kw)
             model.refresh(state, 1)
-            H = model._model
             count = _pcg(H, lambda r, m=model: fine(r) + m._coarse(r), b)
             out.append(f"{name} {count} ({model.A.shape[1]} coarse unknowns)")
         print(f"{kind} n={ls.n}: P {_pcg(H, fine, b)}, " + ", ".join(out), flush=True)

@@ -2,11 +2,18 @@
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from scipy.spatial.transform import Rotation
 
 import igljoin
 from igljoin import newton, phantoms
-from igljoin.terms import LocalState, ShapeTerm, StretchTerm, unique_edges
+from igljoin.terms import (
+    ROTATION_REGULARISATION,
+    LocalState,
+    ShapeTerm,
+    StretchTerm,
+    unique_edges,
+)
 
 
 @pytest.fixture(scope="module")
@@ -78,3 +85,77 @@ def test_same_minimum_as_a_long_plain_run_in_fewer_iterations(scenario):
     # full-size patch, 25 against 102 on the tube; docs/limits.md)
     assert fast.iterations < default.iterations
     assert np.all(np.diff(fast.energy) <= 0.0)
+
+
+def _cross(c):
+    """Cross-product matrices [c]x (k, 3, 3) of vectors c (k, 3)."""
+    out = np.zeros((len(c), 3, 3))
+    out[:, 0, 1], out[:, 0, 2] = -c[:, 2], c[:, 1]
+    out[:, 1, 0], out[:, 1, 2] = c[:, 2], -c[:, 0]
+    out[:, 2, 0], out[:, 2, 1] = -c[:, 1], c[:, 0]
+    return out
+
+
+def _inertia(c, w):
+    """w (|c|² I − c cᵀ) (k, 3, 3) for vectors c (k, 3) and weights w (k,)."""
+    out = -c[:, :, None] * c[:, None, :]
+    s = np.einsum("ij,ij->i", c, c)
+    for a in range(3):
+        out[:, a, a] += s
+    return out * w[:, None, None]
+
+
+def _reference_rotation_factor(term, state):
+    """C (Σ_i M_i S_i⁻¹ M_iᵀ = CᵀC) by numpy, written from the model's definition."""
+    n, R = term.n, state.rotations
+    w, mu = term.weight, ROTATION_REGULARISATION
+    L = sp.csr_matrix(term.L, copy=True)
+    L.sort_indices()
+    rows = np.repeat(np.arange(n), np.diff(L.indptr))
+    keys = rows * n + L.indices
+    # the Laplacian row of vertex i: target c = R_i δ_i, coefficient L[i, v] at v
+    c_lap = np.einsum("nij,nj->ni", R, term.delta)
+    M = (w * L.data)[:, None, None] * _cross(c_lap)[rows]
+    S = _inertia(c_lap, np.full(n, w))
+    # one-ring edge rows owned by each end: +[c]x at the owner, −[c]x at the other end
+    E = term.E
+    for own, other, sign in ((0, 1, 1.0), (1, 0, -1.0)):
+        o, t = E[:, own], E[:, other]
+        c = sign * np.einsum("eij,ej->ei", R[o], term.rest_edges)
+        X = (w * mu) * _cross(c)
+        np.add.at(M, np.searchsorted(keys, o * n + o), X)
+        np.add.at(M, np.searchsorted(keys, o * n + t), -X)
+        np.add.at(S, o, _inertia(c, np.full(len(c), w * mu)))
+    # rows 3 i + c of C hold (M_i Z_i)[:, c] at vertex i's closed one-ring (S⁻¹ = Z Zᵀ)
+    Z = np.linalg.cholesky(np.linalg.inv(S))
+    N = np.einsum("pab,pbc->pac", M, Z[rows])  # (p, coordinate a of the column vertex, c)
+    data = np.transpose(N, (0, 2, 1))  # (p, c, a)
+    r = np.broadcast_to(3 * rows[:, None, None] + np.arange(3)[None, :, None], data.shape)
+    col = np.broadcast_to(3 * L.indices[:, None, None] + np.arange(3)[None, None, :], data.shape)
+    return sp.csr_matrix((data.ravel(), (r.ravel(), col.ravel())), shape=(3 * n, 3 * n))
+
+
+def test_the_factors_are_the_reference_factors_with_or_without_a_cache():
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.5)
+    solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    ls = solver.solver
+    X0 = solver.initial_guess()
+    start, _, _ = ls.local(X0)
+    later, _, _ = ls.local(ls.run(X0, solver.corr.targets, max_iterations=10).X, start.rotations)
+    cache = {}
+    newton.gauss_newton_factors(ls.terms, start, ls.n, cache)  # fills the cache
+    shape = next(t for t in ls.terms if isinstance(t, ShapeTerm))
+    assert shape.rotation_aware
+    for state in (start, later):
+        fresh = newton.gauss_newton_factors(ls.terms, state, ls.n)
+        got = newton.gauss_newton_factors(ls.terms, state, ls.n, cache)
+        assert len(fresh) == len(got)
+        for (J0, w0, s0), (J1, w1, s1) in zip(fresh, got):
+            # the cache keeps patterns only: the very same values
+            assert s0 == s1 and J0.shape == J1.shape and abs(J0 - J1).max() == 0.0
+            assert np.array_equal(w0, w1)
+        C = next(J for J, _, sign in got if sign < 0)
+        ref = _reference_rotation_factor(shape, state)
+        # the compiled kernel inverts 3 x 3 blocks by cofactors, numpy by LAPACK: the
+        # same matrix to rounding (1e-12 of its largest entry)
+        assert abs(C - ref).max() <= 1e-12 * abs(ref).max()

@@ -2,10 +2,13 @@
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 import igljoin
-from igljoin import linsolve, newton, phantoms, twolevel
+from igljoin import coarse_kernels, linsolve, newton, twolevel
 from igljoin.terms import SmoothJoinTerm
+
+from .test_twolevel import _solver
 
 pardiso = pytest.mark.skipif(
     "pardiso" not in linsolve.available_backends(), reason="the augmented system needs Pardiso"
@@ -14,8 +17,8 @@ pardiso = pytest.mark.skipif(
 
 @pytest.fixture(scope="module")
 def patch():
-    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.5)
-    return s, igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    # the two-level tests' patch: the paper's partial patch at resolution 0.5
+    return _solver("partial_patch")
 
 
 def _start(solver):
@@ -25,7 +28,7 @@ def _start(solver):
 @pardiso
 @pytest.mark.parametrize("bending", [False, True])
 def test_band_rows_kept_apart_give_the_same_coarse_model(patch, monkeypatch, bending):
-    _, solver = patch
+    solver = patch
     ls = solver.solver
     state = _start(solver)
     assembled = twolevel.TwoLevelModel(ls, cluster_size=5, bending=bending)
@@ -55,18 +58,60 @@ def test_band_rows_kept_apart_give_the_same_coarse_model(patch, monkeypatch, ben
     assert np.linalg.norm(a - b) <= 1e-5 * np.linalg.norm(a)
 
 
+def test_the_rows_kept_apart_are_the_factor_rows_on_the_motions(patch):
+    # every term's rows K_r ⊗ d on the motions, as a wide term's are kept (the band rows
+    # have one direction per row, the stretch term four, K ⊗ I₃ the three unit ones)
+    solver = patch
+    ls = solver.solver
+    state = _start(solver)
+    model = twolevel.TwoLevelModel(ls, cluster_size=5, bending=True)
+    model.refresh(state, 1)
+    A, free, w = model.A, newton.dofs(ls.free), model.motions.shape[2]
+    for term, (K, of_K, _) in zip(ls.terms, model._patterns):
+        ((_, directions, weights),), _ = newton.factor_rows(term, state)
+        D = weights.shape[1]
+        directions = np.zeros((0, 3, 3)) if directions is None else directions
+        values = coarse_kernels.motion_rows_of(
+            K.indptr, K.indices, K.data, np.ascontiguousarray(directions), of_K[0], of_K[2],
+            model._where, model.motions,
+        )  # fmt: skip
+        got = twolevel._motion_matrix(values, of_K[0], of_K[1], D, w, model._clusters)
+        # the reference: the factors J (K ⊗ I₃ has its rows 3 r + d already; the stretch
+        # term's four factors interleaved row by row), times A
+        factors = [J for J, _, sign in newton.gauss_newton_factors([term], state, ls.n)]
+        factors = [J[:, free] @ A for J in factors[: 1 if D == 3 else D]]
+        expected = factors[0].toarray()
+        if len(factors) > 1:
+            expected = np.stack([F.toarray() for F in factors], 1).reshape(-1, A.shape[1])
+        # the same products summed in another order: rounding, 1e-12 of the largest entry
+        assert got.shape == expected.shape
+        assert np.abs(got.toarray() - expected).max() <= 1e-12 * np.abs(expected).max()
+
+
 def test_the_count_is_the_coarse_matrix_held(patch):
-    _, solver = patch
+    solver = patch
     model = twolevel.TwoLevelModel(solver.solver, bending=True)
     model.refresh(_start(solver), 1)
     # the band rows of the small patch reach a few clusters: all assembled, every entry
     # of the coarse matrix counted
     assert not any(model._wide)
     assert model.coarse_entries == model.coarse_matrix().nnz
+    # and besides it what the model keeps: one cluster slot per entry of the operators
+    # (and of the Laplacian), every free vertex's motions; no factor of the Gauss–Newton
+    # model (the additive form projects the operators' rows without forming them)
+    slots = sum(len(K[2]) + (0 if L is None else len(L[2])) for _, K, L in model._patterns)
+    assert model.model_entries == model.coarse_entries + slots + model.motions.size
+    assert model.factors is None
+    # the balancing form keeps the factors for its products with H, and counts them
+    balancing = twolevel.TwoLevelModel(solver.solver, bending=True, balancing=True)
+    balancing.refresh(_start(solver), 1)
+    factors = sum(J.nnz for J, _, _ in balancing.factors)
+    assert factors == sum(newton.factor_entries(t) for t in solver.solver.terms)
+    assert balancing.model_entries == model.model_entries + factors
 
 
 def test_the_factors_entries_are_counted_from_the_patterns(patch):
-    _, solver = patch
+    solver = patch
     ls = solver.solver
     state = _start(solver)
     for term in ls.terms:
@@ -75,27 +120,29 @@ def test_the_factors_entries_are_counted_from_the_patterns(patch):
 
 
 def test_a_coarse_system_too_large_is_refused_before_it_is_built(patch, monkeypatch):
-    s, solver = patch
+    solver = patch
     ls = solver.solver
     monkeypatch.setattr(twolevel, "MAX_MODEL_ENTRIES", 100)
 
     def expensive(*args, **kwargs):
         raise AssertionError("the model was built past the guard")
 
+    # the model's values are computed term after term by factor_rows (and by
+    # gauss_newton_factors for the balancing form): neither may run
+    monkeypatch.setattr(twolevel, "factor_rows", expensive)
     monkeypatch.setattr(twolevel, "gauss_newton_factors", expensive)
     model = twolevel.TwoLevelModel(ls)
     with pytest.raises(igljoin.OptionsError, match="MAX_MODEL_ENTRIES.*preconditioner='factored'"):
         model.refresh(_start(solver), 1)
     assert model.model_entries > 100 and model.factorizations == 0
     # the join with the explicit option is refused with the same message
-    fresh = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    fresh = _solver("partial_patch")
     with pytest.raises(igljoin.OptionsError, match="model would hold"):
         fresh.solve(preconditioner="two-level")
 
 
-def test_auto_keeps_the_factored_form_when_the_coarse_system_is_too_large(patch, monkeypatch):
-    s, _ = patch
-    solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+def test_auto_keeps_the_factored_form_when_the_coarse_system_is_too_large(monkeypatch):
+    solver = _solver("partial_patch")
     default = solver.solve(preconditioner="factored")
     assert solver.last_model is None
     monkeypatch.setattr(twolevel, "AUTO_FROM_VERTICES", 0)
@@ -110,3 +157,20 @@ def test_auto_keeps_the_factored_form_when_the_coarse_system_is_too_large(patch,
     # and the solver keeps the model, which says why it kept P
     assert "MAX_MODEL_ENTRIES" in solver.last_model.fallback
     assert solver.last_run.stats["model_builds"] == 0
+
+
+@pardiso
+def test_a_singular_coarse_system_is_refused_with_the_way_out():
+    # A_c = S + Uᵀ W U of rank 1 on four unknowns: Pardiso perturbs the zero pivots, and the
+    # probe solve's residual (of order 1) gives it away
+    S = sp.csr_matrix((4, 4))
+    U = sp.csr_matrix(np.array([[1.0, 1.0, 0.0, 0.0]]))
+    with pytest.raises(igljoin.SolveError, match="coarse system.*preconditioner='factored'"):
+        twolevel._CoarseAugmented(S, U, np.ones(1))
+    # the same system made definite by its S is factored, and solves A_c x = b
+    S = sp.identity(4, format="csr")
+    f = twolevel._CoarseAugmented(S, U, np.ones(1))
+    b = np.arange(1.0, 5.0)[:, None]
+    A = (S + U.T @ U).toarray()
+    # a 4 x 4 LDLᵀ solve: rounding, far below 1e-12
+    assert np.abs(A @ f.solve_free(b) - b).max() <= 1e-12 * np.abs(b).max()
