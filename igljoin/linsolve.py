@@ -71,11 +71,11 @@ join: hence 10 M.
 Measured and not chosen: scipy's SuperLU (symmetric mode, no pivoting)
 factors faster than cholespy on the dense band systems but back-solves 2 ×
 slower; a nested-dissection (METIS) or reverse Cuthill–McKee order given
-to cholespy changes nothing (CHOLMOD reorders with its own nested dissection, NESDIS, itself); QDLDL and
-pypardiso's own ``spsolve`` (it hashes the matrix on every call and treats
-it as unsymmetric) back-solve 3 to 7 × slower; two MKL threads made the
-back-solve slower or no faster (4 × slower at 10k), which is why it runs
-on one.
+to cholespy changes nothing (CHOLMOD reorders with its own nested
+dissection, NESDIS); QDLDL and pypardiso's own ``spsolve`` (it hashes
+the matrix on every call and treats it as unsymmetric) back-solve 3 to 7 ×
+slower; two MKL threads made the back-solve slower or no faster (4 ×
+slower at 10k), which is why it runs on one.
 
 :class:`AugmentedQuadratic` solves ``S + c Kᵀ W K`` without forming the
 dense block ``Kᵀ W K`` of long rows (the band smooth join on a guest much

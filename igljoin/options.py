@@ -270,9 +270,10 @@ class JoinOptions:
         quasi-Newton steps: with ``acceleration=0`` ``"auto"`` is the
         factored form and ``"two-level"`` is refused; ``"auto"`` is the
         factored form as well when the coarse model would
-        hold more than :data:`igljoin.twolevel.MAX_MODEL_ENTRIES` entries
-        (counted before it is built), where ``"two-level"`` is refused with
-        an ``OptionsError``.
+        hold more than :data:`igljoin.twolevel.AUTO_MAX_MODEL_ENTRIES`
+        entries (counted before it is built; past that size it was
+        measured not to pay), and ``"two-level"`` is refused with an
+        ``OptionsError`` past :data:`igljoin.twolevel.MAX_MODEL_ENTRIES`.
     linear_solver : {"auto", "igl", "cholespy", "pardiso"}
         Sparse Cholesky backend of the global step: libigl's
         ``min_quad_with_fixed`` (always available), cholespy (the

@@ -69,6 +69,7 @@ __all__ = [
     "AUTO_FROM_VERTICES",
     "AUTO_MODEL",
     "MAX_MODEL_ENTRIES",
+    "AUTO_MAX_MODEL_ENTRIES",
 ]
 
 # relative ridge added to the coarse matrix: a cluster of three nearly collinear vertices
@@ -88,6 +89,14 @@ _RIDGE = 1e-10
 #: first and adds a fifth of that. 1.6e8 entries are about 8 GB. Past it
 #: ``preconditioner="auto"`` keeps the factored ``P`` and ``"two-level"`` is refused.
 MAX_MODEL_ENTRIES = 160_000_000
+
+#: Largest count ``preconditioner="auto"`` builds (past it, it keeps the factored ``P``):
+#: where the model pays was measured, not where it fits. The 300k tube (34 M entries)
+#: converged in 485 iterations and 415 s against ``P``'s 1,316 and 523 s; the 1M tube
+#: (131 M) rebuilt its coarse space 16 times at 22.5 s a factorization, 46 of its 88 local
+#: steps rejected trials, and stood at 41 iterations after 600 s (``P``: 451) with a peak
+#: of 19.5 GB against 10 GB. 6e7 entries (about 3 GB at a first build) lies between.
+AUTO_MAX_MODEL_ENTRIES = 60_000_000
 
 #: Bytes a first build spends per counted entry (the 36-53 measured above, rounded up).
 _BYTES_PER_ENTRY = 50
@@ -430,8 +439,9 @@ class TwoLevelModel:
         Earliest iteration at which a rebuild is made.
     fall_back : bool
         When the model would hold more than :data:`MAX_MODEL_ENTRIES`
-        entries: keep the factored ``P`` alone (``True``, what
-        ``preconditioner="auto"`` asks) instead of raising ``OptionsError``.
+        entries (:data:`AUTO_MAX_MODEL_ENTRIES` with ``fall_back``): keep
+        the factored ``P`` alone (``True``, what ``preconditioner="auto"``
+        asks) instead of raising ``OptionsError``.
 
     Attributes
     ----------
@@ -547,7 +557,7 @@ class TwoLevelModel:
             self._where[ls.free] = np.arange(len(ls.free))
             self._clusters = int(self.labels.max()) + 1
             self._wide = self._count(self._clusters, 9 if self.bending else 6)
-            if self.model_entries > MAX_MODEL_ENTRIES:
+            if self.model_entries > self._limit():
                 self.seconds["clusters"] += time.perf_counter() - t0
                 message = self._too_large()
                 if not self.fall_back:
@@ -639,6 +649,10 @@ class TwoLevelModel:
         self.model_entries = self.coarse_entries + held
         return wide
 
+    def _limit(self) -> int:
+        """The count past which this model is not built (read when it is counted)."""
+        return AUTO_MAX_MODEL_ENTRIES if self.fall_back else MAX_MODEL_ENTRIES
+
     def _too_large(self) -> str:
         """The refusal's message: the count, the limit and the ways out."""
         pardiso = (
@@ -647,13 +661,14 @@ class TwoLevelModel:
             else "linear_solver='auto' with Pardiso installed (the smooth join's band rows "
             "are then kept out of the coarse matrix), "
         )
+        name = "AUTO_MAX_MODEL_ENTRIES" if self.fall_back else "MAX_MODEL_ENTRIES"
         return (
             f"the two-level preconditioner's model would hold {self.model_entries:,} entries "
             f"(its coarse system {self.coarse_entries:,}), more than "
-            f"igljoin.twolevel.MAX_MODEL_ENTRIES = {MAX_MODEL_ENTRIES:,} (about "
+            f"igljoin.twolevel.{name} = {self._limit():,} (about "
             f"{_BYTES_PER_ENTRY * self.model_entries / 1e9:.0f} GB at its first build): use "
             "preconditioner='factored' (or 'auto', which then keeps the factored form), "
-            f"{pardiso}or raise igljoin.twolevel.MAX_MODEL_ENTRIES"
+            f"{pardiso}or raise igljoin.twolevel.{name}"
         )
 
     def coarse_matrix(self) -> sp.csr_matrix:
@@ -821,7 +836,7 @@ def preferred_model(solver, options):
         built once for ``"two-level"`` (refused with ``OptionsError`` at
         its first refresh past :data:`MAX_MODEL_ENTRIES`); :data:`AUTO_MODEL`
         for ``"auto"`` from :data:`AUTO_FROM_VERTICES` on, which past
-        :data:`MAX_MODEL_ENTRIES` stays ``P`` alone and says so in its
+        :data:`AUTO_MAX_MODEL_ENTRIES` stays ``P`` alone and says so in its
         ``fallback``.
     """
     choice = options.preconditioner

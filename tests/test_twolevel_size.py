@@ -146,16 +146,19 @@ def test_auto_keeps_the_factored_form_when_the_coarse_system_is_too_large(monkey
     default = solver.solve(preconditioner="factored")
     assert solver.last_model is None
     monkeypatch.setattr(twolevel, "AUTO_FROM_VERTICES", 0)
-    monkeypatch.setattr(twolevel, "MAX_MODEL_ENTRIES", 100)
+    # auto's own limit, below the explicit option's: a model the explicit option would
+    # build is not built by auto
+    monkeypatch.setattr(twolevel, "AUTO_MAX_MODEL_ENTRIES", 100)
     model = twolevel.preferred_model(solver.solver, igljoin.JoinOptions(preconditioner="auto"))
     assert not model.refresh(_start(solver), 1)
-    assert "MAX_MODEL_ENTRIES" in model.fallback and model.factorizations == 0
+    assert "AUTO_MAX_MODEL_ENTRIES = 100 " in model.fallback and model.factorizations == 0
+    assert model.model_entries < twolevel.MAX_MODEL_ENTRIES
     auto = solver.solve(preconditioner="auto")
     # the fallback is P alone: the very iterations of the factored form
     assert auto.iterations == default.iterations
     assert auto.energy[-1] == default.energy[-1]
     # and the solver keeps the model, which says why it kept P
-    assert "MAX_MODEL_ENTRIES" in solver.last_model.fallback
+    assert "AUTO_MAX_MODEL_ENTRIES" in solver.last_model.fallback
     assert solver.last_run.stats["model_builds"] == 0
 
 
