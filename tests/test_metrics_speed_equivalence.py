@@ -330,7 +330,7 @@ def test_host_values_follow_the_arrays_and_are_kept_on_the_solver():
     solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
     a = solver.solve()
     kept = dict(solver.host_values.made)
-    assert {key[0] for key in kept} == {"band_fit", "inward", "dihedral"}
+    assert {key[0] for key in kept} == {"band_fit", "inward", "dihedral", "distance"}
     b = solver.solve()
     assert all(solver.host_values.made[key] is value for key, value in kept.items())
     # and they are what the plain functions give
