@@ -164,6 +164,14 @@ class RestMeasures:
         return self._kept(("areas",), lambda: face_areas(self.corr.V, self.corr.F))
 
     @property
+    def coordinate_major(self) -> tuple[np.ndarray, np.ndarray]:
+        """The faces (m, 3) and the edges ``E`` (e, 2), each the transpose of a C-ordered copy."""
+        return self._kept(
+            ("coordinate major",),
+            lambda: tuple(np.ascontiguousarray(A.T).T for A in (self.corr.F, self.E)),
+        )
+
+    @property
     def incidence(self) -> metrics.VertexIncidence:
         """The edges' ends, each vertex's edge count (:func:`igljoin.metrics.vertex_incidence`)."""
         n = len(self.corr.V)
@@ -258,9 +266,13 @@ def join_result(
     """
     c, X, bc = corr, run.X, targets
     measured_host = host_values.measured  # same vertex ids as the host
-    normals, areas = face_normals_areas(X, c.F)
+    # the positions, faces and edges coordinate-major, as the face and edge measures read
+    # them: their own np.ascontiguousarray(A.T) is then no copy
+    Xc = np.ascontiguousarray(X.T).T
+    Fc, Ec = rest.coordinate_major
+    normals, areas = face_normals_areas(Xc, Fc)
     ratio = metrics.area_ratio(c.V, X, c.F, rest_areas=rest.areas, areas=areas)
-    strain = metrics.edge_strain(c.V, X, E, rest_lengths=rest.edge_lengths)
+    strain = metrics.edge_strain(c.V, Xc, Ec, rest_lengths=rest.edge_lengths)
     vertex_strain = metrics.vertex_strain(E, strain, len(X), incidence=rest.incidence)
     displacement = metrics.nonrigid_displacement(c.V, X, rest=rest.rigid)
     on_seam = np.zeros(len(X), dtype=bool)

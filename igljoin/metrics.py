@@ -371,11 +371,18 @@ def _guest_inward(V: np.ndarray, kept: CurveFaces) -> np.ndarray:
     ndarray, shape (k, 3)
     """
     F, W0, P, T = kept
-    normals, areas = face_normals_areas(V, F)
+    corners = V[F]  # (m', 3, 3): read once, for the normals and the centroids
+    # face_normals_areas(V, F): the cross products as np.cross rounds them, their
+    # lengths with the squares summed left to right
+    c = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    sq = c * c
+    length = np.sqrt((sq[:, 0] + sq[:, 1]) + sq[:, 2])
+    normals = c / np.where(length > 0, length, 1.0)[:, None]
+    areas = 0.5 * length
     W = sp.csr_matrix((1.0 * areas[W0.indices], W0.indices, W0.indptr), shape=W0.shape)
     n = unit(W @ normals)
     h = unit(np.cross(n, T))
-    centroid_offset = (W @ V[F].mean(axis=1)) / np.maximum(np.asarray(W.sum(axis=1)), 1e-300) - P
+    centroid_offset = (W @ corners.mean(axis=1)) / np.maximum(np.asarray(W.sum(axis=1)), 1e-300) - P
     flip = np.einsum("ij,ij->i", h, centroid_offset) < 0
     h[flip] *= -1.0
     return h
@@ -1112,7 +1119,10 @@ def _near_segments(
     ``|P − M| − r`` from ``P``. Measuring the segment with the nearest
     midpoint gives an upper bound ``d`` on the distance; a segment can only
     beat it if ``|P − M| ≤ d + r``, so the segments with midpoints within
-    ``d + max r`` (plus a margin far above rounding) are listed.
+    ``d + max r`` (plus a margin far above rounding) are listed. Whichever
+    midpoint is taken as the nearest where two are as near, every segment
+    whose distance can be the smallest is listed, so the smallest distance
+    is the same.
 
     Parameters
     ----------
@@ -1127,20 +1137,20 @@ def _near_segments(
     point, seg : ndarray of int64, shape (c,)
         The pairs, every point at least once.
     """
-    k = len(A)
+    k, p = len(A), len(P)
     M, ab2, half, half_max, extent, tree = _midpoints(A, AB) if kept is None else kept
-    _, nearest = tree.query(P)
-    upper = _segment_distances(P, A, AB, ab2, np.arange(len(P)), nearest, len(P))
+    # the `count` nearest midpoints of every point: the nearest gives the bound
+    count = min(k, 8)
+    dist, idx = tree.query(P, k=count)
+    dist, idx = dist.reshape(p, count), idx.reshape(p, count)
+    upper = _segment_distances(P, A, AB, ab2, np.arange(p), idx[:, 0], p)
     scale = max(float(np.abs(P).max()), extent)
     radius = upper + half_max + 1e-9 * scale  # 1e-9: far above the rounding of any term
-    # the midpoints within each radius: ask for `count` neighbours, twice as many for the
-    # points whose last one is still inside their radius
-    point = np.arange(len(P))
+    # the midpoints within each radius: twice as many neighbours for the points whose
+    # last one is still inside their radius
+    point = np.arange(p)
     found_point, found_seg = [], []
-    count = min(k, 8)
-    while point.size:
-        dist, idx = tree.query(P[point], k=count, distance_upper_bound=float(radius[point].max()))
-        dist, idx = dist.reshape(len(point), count), idx.reshape(len(point), count)
+    while True:
         inside = dist <= radius[point, None]
         more = inside[:, -1] & (count < k)
         done = ~more
@@ -1148,8 +1158,11 @@ def _near_segments(
         found_point.append(point[done][rows])
         found_seg.append(idx[done][rows, cols])
         point = point[more]
+        if not point.size:
+            return np.concatenate(found_point), np.concatenate(found_seg).astype(np.int64)
         count = min(k, 2 * count)
-    return np.concatenate(found_point), np.concatenate(found_seg).astype(np.int64)
+        dist, idx = tree.query(P[point], k=count, distance_upper_bound=float(radius[point].max()))
+        dist, idx = dist.reshape(len(point), count), idx.reshape(len(point), count)
 
 
 def seam_gap(
