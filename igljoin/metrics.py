@@ -352,6 +352,16 @@ def curve_faces(seam: SeamGeometry) -> CurveFaces | None:
     return CurveFaces(faces, weights, points, tangent.tangent)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross(a, b)`` of rows ``a``, ``b`` (k, 3): each coordinate one rounded product
+    less another, as it rounds them, without its overhead on short arrays."""
+    c = np.empty((len(a), 3))  # C-ordered, as np.cross returns it (einsum sums by layout)
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        np.multiply(a[:, j], b[:, k], out=c[:, i])
+        c[:, i] -= a[:, k] * b[:, j]
+    return c
+
+
 def _guest_inward(V: np.ndarray, kept: CurveFaces) -> np.ndarray:
     """The one-ring inward directions of :func:`igljoin.frames.seam_frames` at positions ``V``.
 
@@ -374,15 +384,21 @@ def _guest_inward(V: np.ndarray, kept: CurveFaces) -> np.ndarray:
     corners = V[F]  # (m', 3, 3): read once, for the normals and the centroids
     # face_normals_areas(V, F): the cross products as np.cross rounds them, their
     # lengths with the squares summed left to right
-    c = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    c = _cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     sq = c * c
     length = np.sqrt((sq[:, 0] + sq[:, 1]) + sq[:, 2])
     normals = c / np.where(length > 0, length, 1.0)[:, None]
     areas = 0.5 * length
     W = sp.csr_matrix((1.0 * areas[W0.indices], W0.indices, W0.indptr), shape=W0.shape)
     n = unit(W @ normals)
-    h = unit(np.cross(n, T))
-    centroid_offset = (W @ corners.mean(axis=1)) / np.maximum(np.asarray(W.sum(axis=1)), 1e-300) - P
+    h = unit(_cross(n, T))
+    # the faces' centroids, their corners summed in order (corners.mean(axis=1)), and the
+    # rows' sums of W as W.sum(axis=1) adds them (np.add.reduceat over each row's entries)
+    centroids = (corners[:, 0] + corners[:, 1] + corners[:, 2]) / 3.0
+    rows = np.flatnonzero(np.diff(W0.indptr))
+    total = np.zeros((W0.shape[0], 1))
+    total[rows, 0] = np.add.reduceat(W.data, W0.indptr[rows])
+    centroid_offset = (W @ centroids) / np.maximum(total, 1e-300) - P
     flip = np.einsum("ij,ij->i", h, centroid_offset) < 0
     h[flip] *= -1.0
     return h
