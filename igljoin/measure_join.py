@@ -93,9 +93,11 @@ class RestMeasures:
     """The rest guest's side of a join's measures, made on first use and kept by a solver.
 
     The rest guest is fixed until the next set-up, so its band fits along the
-    seams, the input crease, its face areas and edge lengths and its adjacent
-    face pairs are the same on every solve; a re-solve measures only what its
-    new positions change.
+    seams, the input crease, its face areas and edge lengths, its adjacent
+    face pairs, its faces along each seam (with their weights' rows and the
+    curve's tangents), its edges' incidence, its centred positions and its
+    read-only arrays are the same on every solve; a re-solve measures only
+    what its new positions change.
 
     Parameters
     ----------
