@@ -1,7 +1,7 @@
 """The rigid host's values along its seam curves, made once and kept by a solver.
 
-The host does not move, so its band fits, one-ring inward directions and
-dihedral angles along a curve are the same on every solve. A
+The host does not move, so its band fits, one-ring inward directions,
+dihedral angles and distances along a curve are the same on every solve. A
 :class:`HostValues` makes each the first time it is asked for and keeps it;
 the solver owns one and passes it to the functions that build its terms and
 measure its results. The functions it calls stay plain functions of arrays.
@@ -18,7 +18,7 @@ from .bandfit import BandFit, band_fit
 from .boundary import SelectedCurve
 from .frames import seam_frames
 from .mesh import Mesh
-from .metrics import host_dihedral_angles
+from .metrics import PolylineDistance, host_dihedral_angles
 
 __all__ = ["HostValues"]
 
@@ -39,7 +39,7 @@ class HostValues:
     ----------
     made : dict
         The values made so far, keyed by ``(kind, ...)`` with ``kind`` one of
-        ``"band_fit"``, ``"inward"``, ``"dihedral"``.
+        ``"band_fit"``, ``"inward"``, ``"dihedral"``, ``"distance"``.
     """
 
     def __init__(self, host: Mesh, measured: Mesh | None = None):
@@ -73,3 +73,9 @@ class HostValues:
         key = ("dihedral", np.asarray(curve).tobytes())
         V, F = self.measured.V, self.measured.F
         return self._kept(key, lambda: host_dihedral_angles(V, F, curve))
+
+    def distance(self, curve: SelectedCurve) -> PolylineDistance:
+        """Distances to the host curve ``curve`` (:class:`igljoin.metrics.PolylineDistance`)."""
+        key = ("distance", curve.indices.tobytes(), bool(curve.closed))
+        V = self.measured.V
+        return self._kept(key, lambda: PolylineDistance(V[curve.indices], curve.closed))

@@ -20,7 +20,7 @@ from . import crease, metrics
 from .bandfit import BandFit, band_fit
 from .correspond import Correspondence
 from .crease import CreaseMeasure
-from .frames import face_areas
+from .frames import face_areas, face_normals_areas
 from .host_values import HostValues
 from .join_terms import JoinTerms, join_angles
 from .measure import combined_gap
@@ -60,13 +60,44 @@ def _fixed_reports(inputs: list[CreaseMeasure], removed: np.ndarray, dihedral: n
     }
 
 
+def _fixed_reports_of(
+    inputs: list[CreaseMeasure],
+    removed: Callable[[], np.ndarray],
+    dihedral: Callable[[], np.ndarray],
+) -> dict:
+    """:func:`_fixed_reports` of the arrays the callables make (only when first made)."""
+    return _fixed_reports(inputs, removed(), dihedral())
+
+
+def _removed(removed: list[np.ndarray], seam: int | None) -> np.ndarray:
+    """The crease the terms remove (degrees) along seam ``seam``, or all seams' (``None``)."""
+    if not removed:
+        return np.zeros(0)
+    return np.concatenate(removed) if seam is None else removed[seam]
+
+
+def _deformed_guest(X: np.ndarray, faces: np.ndarray, vertex: dict, face: dict) -> Mesh:
+    """The deformed guest as a :class:`Mesh` named "deformed guest".
+
+    Of the join's own arrays, unchecked (a copy of ``X``, a view of the kept
+    read-only ``faces``, the attributes as made); positions that are not all
+    finite (a solve gone wrong) go through the checks, which refuse them.
+    """
+    if not np.isfinite(X).all():
+        return Mesh(X, faces, vertex, face, name="deformed guest")
+    V = np.array(X, dtype=np.float64, order="C")
+    return Mesh._of_own_arrays(V, faces.view(), vertex, face, name="deformed guest")
+
+
 class RestMeasures:
     """The rest guest's side of a join's measures, made on first use and kept by a solver.
 
     The rest guest is fixed until the next set-up, so its band fits along the
-    seams, the input crease, its face areas and edge lengths and its adjacent
-    face pairs are the same on every solve; a re-solve measures only what its
-    new positions change.
+    seams, the input crease, its face areas and edge lengths, its adjacent
+    face pairs, its faces along each seam (with their weights' rows and the
+    curve's tangents), its edges' incidence, its centred positions and its
+    read-only arrays are the same on every solve; a re-solve measures only
+    what its new positions change.
 
     Parameters
     ----------
@@ -124,10 +155,54 @@ class RestMeasures:
         """
         return {name: dict(value) for name, value in self._kept(key, make).items()}
 
+    def curve_faces(self, seam: SeamGeometry) -> metrics.CurveFaces | None:
+        """:func:`igljoin.metrics.curve_faces` of ``seam`` (its guest's faces at the curve)."""
+        key = ("curve faces", seam.guest_at_host.tobytes(), seam.host_curve.tobytes(), seam.closed)
+        return self._kept(key, lambda: metrics.curve_faces(seam))
+
     @property
     def areas(self) -> np.ndarray:
         """Face areas, shape (m,)."""
         return self._kept(("areas",), lambda: face_areas(self.corr.V, self.corr.F))
+
+    @property
+    def coordinate_major(self) -> tuple[np.ndarray, np.ndarray]:
+        """The faces (m, 3) and the edges ``E`` (e, 2), each the transpose of a C-ordered copy."""
+        return self._kept(
+            ("coordinate major",),
+            lambda: tuple(np.ascontiguousarray(A.T).T for A in (self.corr.F, self.E)),
+        )
+
+    @property
+    def incidence(self) -> metrics.VertexIncidence:
+        """The edges' ends, each vertex's edge count (:func:`igljoin.metrics.vertex_incidence`)."""
+        n = len(self.corr.V)
+        return self._kept(("incidence",), lambda: metrics.vertex_incidence(self.E, n))
+
+    @property
+    def rigid(self) -> metrics.RigidReference:
+        """The rest side of the rigid fit (:func:`igljoin.metrics.rigid_reference`)."""
+        return self._kept(("rigid",), lambda: metrics.rigid_reference(self.corr.V))
+
+    def rest_guest(self) -> Mesh:
+        """The rest guest as a :class:`Mesh` named "rest guest", made of read-only views.
+
+        Its arrays are views of read-only copies kept here, so every result
+        has a mesh of its own at no copy; nobody can write to them.
+        """
+        V, F = self._kept(("rest guest",), self._rest_arrays)
+        return Mesh._of_own_arrays(V.view(), F.view(), name="rest guest")
+
+    @property
+    def faces(self) -> np.ndarray:
+        """The faces as a :class:`Mesh` holds them (int64, C-ordered, read-only), shape (m, 3)."""
+        return self._kept(("rest guest",), self._rest_arrays)[1]
+
+    def _rest_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        V = np.array(self.corr.V, dtype=np.float64, order="C")
+        F = np.array(self.corr.F, dtype=np.int64, order="C")
+        V.flags.writeable = F.flags.writeable = False
+        return V, F
 
     @property
     def edge_lengths(self) -> np.ndarray:
@@ -193,23 +268,22 @@ def join_result(
     """
     c, X, bc = corr, run.X, targets
     measured_host = host_values.measured  # same vertex ids as the host
-    areas = face_areas(X, c.F)
+    # the positions, faces and edges coordinate-major, as the face and edge measures read
+    # them: their own np.ascontiguousarray(A.T) is then no copy
+    Xc = np.ascontiguousarray(X.T).T
+    Fc, Ec = rest.coordinate_major
+    normals, areas = face_normals_areas(Xc, Fc)
     ratio = metrics.area_ratio(c.V, X, c.F, rest_areas=rest.areas, areas=areas)
-    strain = metrics.edge_strain(c.V, X, E, rest_lengths=rest.edge_lengths)
-    vertex_strain = metrics.vertex_strain(E, strain, len(X))
-    displacement = metrics.nonrigid_displacement(c.V, X)
+    strain = metrics.edge_strain(c.V, Xc, Ec, rest_lengths=rest.edge_lengths)
+    vertex_strain = metrics.vertex_strain(E, strain, len(X), incidence=rest.incidence)
+    displacement = metrics.nonrigid_displacement(c.V, X, rest=rest.rigid)
     on_seam = np.zeros(len(X), dtype=bool)
     on_seam[c.seam] = True
-    guest = Mesh(
+    guest = _deformed_guest(
         X,
-        c.F,
-        vertex_attributes={
-            "displacement": displacement,
-            "strain": vertex_strain,
-            "seam": on_seam,
-        },
-        face_attributes={"area_ratio": ratio},
-        name="deformed guest",
+        rest.faces,
+        {"displacement": displacement, "strain": vertex_strain, "seam": on_seam},
+        {"area_ratio": np.array(ratio)},
     )
     seams, per_seam, gaps = [], [], []
     start = 0
@@ -231,13 +305,15 @@ def join_result(
         fixed = rest.reports(
             ("seam reports", i),
             partial(
-                _fixed_reports,
+                _fixed_reports_of,
                 [inputs],
-                removed[i] if removed else np.zeros(0),
-                host_values.dihedral(hc.indices),
+                partial(_removed, removed, i),
+                partial(host_values.dihedral, hc.indices),
             ),
         )
-        onering = metrics.crease_angles(geometry, host_values.inward(hc))
+        onering = metrics.crease_angles(
+            geometry, host_values.inward(hc), guest_faces=rest.curve_faces(geometry)
+        )
         measured_all.append(measured)
         inputs_all.append(inputs)
         onering_all.append(onering)
@@ -247,7 +323,8 @@ def join_result(
             # a seam keeps the smooth join)
             off = np.abs(measured.angles - (angle or 0.0))
             off_angle_all.append(CreaseMeasure(off, band, measured.noise))
-        gap = metrics.seam_gap(X[part.seam], measured_host.V[hc.indices], hc.closed)
+        distance = host_values.distance(hc)
+        gap = metrics.seam_gap(X[part.seam], distance.C, hc.closed, host=distance)
         gaps.append(gap)
         seams.append(
             JoinedSeam(
@@ -299,32 +376,44 @@ def join_result(
     fixed = rest.reports(
         ("reports",),
         partial(
-            _fixed_reports,
+            _fixed_reports_of,
             inputs_all,
-            np.concatenate(removed) if removed else np.zeros(0),
-            host_values.dihedral(host_curve),
+            partial(_removed, removed, None),
+            partial(host_values.dihedral, host_curve),
         ),
     )
+    if len(per_seam) == 1:
+        # one seam: the reports over all seams are its own (the same values in the same
+        # order), each a copy of its own
+        only = per_seam[0]
+        crease_deg, onering_deg, error_deg = (
+            None if only[name] is None else dict(only[name])
+            for name in ("crease_deg", "crease_onering_deg", "join_angle_error_deg")
+        )
+    else:
+        crease_deg = crease.report(measured_all)
+        onering_deg = metrics.summary(np.concatenate(onering_all))
+        error_deg = crease.report(off_angle_all) if off_angle_all else None
     m = {
         "seam_gap": combined_gap(gaps, [len(sm.seam) for sm in seams]),
-        "crease_deg": crease.report(measured_all),
-        "crease_onering_deg": metrics.summary(np.concatenate(onering_all)),
+        "crease_deg": crease_deg,
+        "crease_onering_deg": onering_deg,
         "input_crease_deg": fixed["input_crease_deg"],
-        "join_angle_error_deg": crease.report(off_angle_all) if off_angle_all else None,
+        "join_angle_error_deg": error_deg,
         "host_dihedral_deg": fixed["host_dihedral_deg"],
         "area_ratio": {**metrics.summary(ratio), "total": total_ratio},
         "area_change": metrics.summary(np.abs(ratio - 1.0)),
         "strain": metrics.summary(strain),
         "vertex_strain": metrics.summary(vertex_strain),
         "displacement_nonrigid": metrics.summary(displacement),
-        "folded_pairs": len(metrics.folded_pairs(c.V, X, c.F, rest=rest.folds)),
+        "folded_pairs": len(metrics.folded_pairs(c.V, X, c.F, rest=rest.folds, normals=normals)),
         "crease_removed_deg": fixed["crease_removed_deg"],
         "seams": per_seam,
     }
     result = JoinResult(
         host=host,
         guest=guest,
-        rest_guest=Mesh(c.V, c.F, name="rest guest"),
+        rest_guest=rest.rest_guest(),
         seams=seams,
         seam_targets=np.array(bc),
         area_ratio=ratio,

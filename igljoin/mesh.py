@@ -174,6 +174,39 @@ class Mesh:
             _attributes(self.face_attributes, F.shape[0], "face", self.name),
         )
 
+    @classmethod
+    def _of_own_arrays(
+        cls,
+        V: np.ndarray,
+        F: np.ndarray,
+        vertex_attributes: dict | None = None,
+        face_attributes: dict | None = None,
+        name: str = "mesh",
+    ) -> Mesh:
+        """A mesh of arrays igljoin made itself, taken as they are: no checks, no copies.
+
+        For a join's own meshes (its deformed and rest guest), whose arrays
+        are already what the checks would make of them: ``V`` float64
+        (n, 3) and finite, ``F`` int64 (m, 3) with indices in ``[0, n)``,
+        attributes one row per vertex or face under identifier names, each
+        array C-ordered and held by nothing that writes it. They are made
+        read-only in place.
+        """
+        vertex_attributes = dict(vertex_attributes or {})
+        face_attributes = dict(face_attributes or {})
+        for a in (V, F, *vertex_attributes.values(), *face_attributes.values()):
+            a.flags.writeable = False
+        mesh = object.__new__(cls)
+        for key, value in (
+            ("V", V),
+            ("F", F),
+            ("vertex_attributes", vertex_attributes),
+            ("face_attributes", face_attributes),
+            ("name", name),
+        ):
+            object.__setattr__(mesh, key, value)
+        return mesh
+
     @property
     def n_vertices(self) -> int:
         """Number of vertices ``n``."""

@@ -36,14 +36,16 @@ Self-intersections
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from .correspond import rigid_fit
 from .errors import OptionsError
-from .frames import face_areas, face_normals_areas, seam_frames
+from .frames import face_areas, face_normals_areas, faces_at, seam_frames, unit, vertex_face_matrix
 from .polyline import mean_segment
 from .seam_geometry import SeamGeometry
 
@@ -51,8 +53,14 @@ __all__ = [
     "area_ratio",
     "edge_strain",
     "vertex_strain",
+    "vertex_incidence",
+    "VertexIncidence",
     "nonrigid_displacement",
+    "rigid_reference",
+    "RigidReference",
     "crease_angles",
+    "curve_faces",
+    "CurveFaces",
     "edge_dihedral_angles",
     "host_dihedral_angles",
     "ring_band",
@@ -64,6 +72,7 @@ __all__ = [
     "edge_lengths",
     "summary",
     "point_polyline_distance",
+    "PolylineDistance",
 ]
 
 #: Default number of vertex rings around the seam searched for self-intersections.
@@ -136,7 +145,9 @@ def edge_lengths(V: np.ndarray, E: np.ndarray) -> np.ndarray:
     return _row_norms(np.take(VT, ET[0], axis=1) - np.take(VT, ET[1], axis=1))
 
 
-def vertex_strain(E: np.ndarray, strain: np.ndarray, n: int) -> np.ndarray:
+def vertex_strain(
+    E: np.ndarray, strain: np.ndarray, n: int, *, incidence: VertexIncidence | None = None
+) -> np.ndarray:
     """Per-vertex strain: the mean strain of the edges incident to each vertex.
 
     Parameters
@@ -147,6 +158,9 @@ def vertex_strain(E: np.ndarray, strain: np.ndarray, n: int) -> np.ndarray:
         Per-edge strain (:func:`edge_strain`); non-finite values are ignored.
     n : int
         Number of vertices.
+    incidence : VertexIncidence, optional
+        ``vertex_incidence(E, n)``, if already made (a solver keeps its rest
+        guest's); used where every strain is finite.
 
     Returns
     -------
@@ -164,14 +178,39 @@ def vertex_strain(E: np.ndarray, strain: np.ndarray, n: int) -> np.ndarray:
     E = np.asarray(E, dtype=np.int64).reshape(-1, 2)
     s = np.asarray(strain, dtype=np.float64)
     ok = np.isfinite(s)
-    ends = E[ok].reshape(-1)
-    total = np.bincount(ends, weights=np.repeat(s[ok], 2), minlength=n)
-    count = np.bincount(ends, minlength=n)
+    if incidence is None or not ok.all():
+        incidence = vertex_incidence(E[ok], n)
+        s = s[ok]
+    ends, count = incidence
+    total = np.bincount(ends, weights=np.repeat(s, 2), minlength=n)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(count > 0, total / np.maximum(count, 1), np.nan)
 
 
-def nonrigid_displacement(V0: np.ndarray, V1: np.ndarray) -> np.ndarray:
+class VertexIncidence(NamedTuple):
+    """The edges' side of :func:`vertex_strain`.
+
+    Attributes
+    ----------
+    ends : ndarray of int64, shape (2e,)
+        The edges' end vertices, edge after edge.
+    count : ndarray of int64, shape (n,)
+        Edges incident to each vertex.
+    """
+
+    ends: np.ndarray
+    count: np.ndarray
+
+
+def vertex_incidence(E: np.ndarray, n: int) -> VertexIncidence:
+    """The end vertices of the edges ``E`` (e, 2) and each of ``n`` vertices' edge count."""
+    ends = np.asarray(E, dtype=np.int64).reshape(-1)
+    return VertexIncidence(ends, np.bincount(ends, minlength=n))
+
+
+def nonrigid_displacement(
+    V0: np.ndarray, V1: np.ndarray, *, rest: RigidReference | None = None
+) -> np.ndarray:
     """Distance of each deformed vertex from the rigidly aligned rest vertex.
 
     The rest positions are first moved onto the deformed ones by the proper
@@ -182,6 +221,9 @@ def nonrigid_displacement(V0: np.ndarray, V1: np.ndarray) -> np.ndarray:
     ----------
     V0, V1 : ndarray, shape (n, 3)
         Rest and deformed positions.
+    rest : RigidReference, optional
+        ``rigid_reference(V0)``, if already made (a solver keeps its rest
+        guest's).
 
     Returns
     -------
@@ -190,11 +232,53 @@ def nonrigid_displacement(V0: np.ndarray, V1: np.ndarray) -> np.ndarray:
     """
     V0 = np.asarray(V0, dtype=np.float64)
     V1 = np.asarray(V1, dtype=np.float64)
-    R, t = rigid_fit(V0, V1)
+    R, t = rigid_fit(V0, V1) if rest is None else _rigid_fit_to(rest, V1)
     return _row_norms(np.ascontiguousarray((V1 - (V0 @ R.T + t)).T))
 
 
-def crease_angles(seam: SeamGeometry, host_inward: np.ndarray | None = None) -> np.ndarray:
+class RigidReference(NamedTuple):
+    """The rest side of the rigid fit of :func:`nonrigid_displacement`.
+
+    Attributes
+    ----------
+    centroid : ndarray, shape (3,)
+        Mean rest position.
+    centred : ndarray, shape (n, 3)
+        Rest positions less their mean.
+    """
+
+    centroid: np.ndarray
+    centred: np.ndarray
+
+
+def rigid_reference(V0: np.ndarray) -> RigidReference:
+    """The mean of the rest positions ``V0`` (n, 3) and the positions less it."""
+    V0 = np.asarray(V0, dtype=np.float64)
+    ca = V0.mean(axis=0)
+    return RigidReference(ca, V0 - ca)
+
+
+def _rigid_fit_to(rest: RigidReference, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``igljoin.correspond.rigid_fit(V0, B)`` with the rest side ``rest`` made already.
+
+    The same operations in the same order, so ``R`` (3, 3) and ``t`` (3,)
+    are the same to the last bit (``tests/test_metrics_speed_equivalence.py``).
+    """
+    ca, centred = rest
+    cb = B.mean(axis=0)
+    H = centred.T @ (B - cb)
+    U, _, Vt = np.linalg.svd(H)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
+    R = Vt.T @ D @ U.T
+    return R, cb - ca @ R.T
+
+
+def crease_angles(
+    seam: SeamGeometry,
+    host_inward: np.ndarray | None = None,
+    *,
+    guest_faces: CurveFaces | None = None,
+) -> np.ndarray:
     """One-ring crease angle in degrees at each host curve vertex.
 
     Parameters
@@ -206,6 +290,10 @@ def crease_angles(seam: SeamGeometry, host_inward: np.ndarray | None = None) -> 
         The host's one-ring inward directions along the curve
         (:func:`igljoin.frames.seam_frames`), if already made (a solver keeps
         them for its rigid host).
+    guest_faces : CurveFaces, optional
+        ``curve_faces(seam)`` of a guest with the same faces and curve, if
+        already made (a solver keeps its rest guest's): the guest's one-ring
+        frames then measure only what moves.
 
     Returns
     -------
@@ -213,11 +301,107 @@ def crease_angles(seam: SeamGeometry, host_inward: np.ndarray | None = None) -> 
     """
     if host_inward is None:
         host_inward = seam_frames(seam.Vh, seam.Fh, seam.host_curve, seam.closed).inward
-    guest = seam_frames(
-        seam.Vg, seam.Fg, seam.guest_at_host, seam.closed, curve_points=seam.host_points
-    )
-    cos = np.einsum("ij,ij->i", guest.inward, -host_inward)
+    if guest_faces is None:
+        guest = seam_frames(
+            seam.Vg, seam.Fg, seam.guest_at_host, seam.closed, curve_points=seam.host_points
+        ).inward
+    else:
+        guest = _guest_inward(seam.Vg, guest_faces)
+    cos = np.einsum("ij,ij->i", guest, -host_inward)
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+class CurveFaces(NamedTuple):
+    """What the guest's one-ring frames along a seam take from its faces and the host curve.
+
+    Attributes
+    ----------
+    faces : ndarray of int64, shape (m', 3)
+        The guest faces at the curve, in their order
+        (:func:`igljoin.frames.faces_at`).
+    weights : scipy.sparse.csr_matrix, shape (k, m')
+        Curve vertex to face incidence of ``faces``: the face area weights'
+        rows and columns, its values to be replaced by the areas.
+    points : ndarray, shape (k, 3)
+        The host curve's positions.
+    tangent : ndarray, shape (k, 3)
+        The curve tangents there (:attr:`igljoin.frames.SeamFrames.tangent`).
+    """
+
+    faces: np.ndarray
+    weights: sp.csr_matrix
+    points: np.ndarray
+    tangent: np.ndarray
+
+
+def curve_faces(seam: SeamGeometry) -> CurveFaces | None:
+    """:class:`CurveFaces` of the guest of ``seam`` along its curve.
+
+    Returns ``None`` for a guest with a face that repeats a vertex at the
+    curve (its weights are not a plain incidence): the frames are then
+    measured in full every time.
+    """
+    n = len(seam.Vg)
+    faces = faces_at(seam.Fg, seam.guest_at_host, n)
+    if ((faces == np.roll(faces, 1, axis=1)).any(axis=1)).any():
+        return None
+    weights = vertex_face_matrix(faces, n)[seam.guest_at_host].tocsr()
+    weights.sort_indices()
+    points = seam.host_points
+    tangent = seam_frames(seam.Vg, faces, seam.guest_at_host, seam.closed, curve_points=points)
+    return CurveFaces(faces, weights, points, tangent.tangent)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross(a, b)`` of rows ``a``, ``b`` (k, 3): each coordinate one rounded product
+    less another, as it rounds them, without its overhead on short arrays."""
+    c = np.empty((len(a), 3))  # C-ordered, as np.cross returns it (einsum sums by layout)
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        np.multiply(a[:, j], b[:, k], out=c[:, i])
+        c[:, i] -= a[:, k] * b[:, j]
+    return c
+
+
+def _guest_inward(V: np.ndarray, kept: CurveFaces) -> np.ndarray:
+    """The one-ring inward directions of :func:`igljoin.frames.seam_frames` at positions ``V``.
+
+    ``seam_frames(V, F, curve, closed, curve_points=kept.points).inward``
+    with the faces at the curve, the rows and columns of their area weights
+    and the curve's tangents taken from ``kept`` (they do not move): the
+    same operations on the same values in the same order, so the same
+    directions to the last bit (``tests/test_metrics_speed_equivalence.py``).
+
+    Parameters
+    ----------
+    V : ndarray, shape (n, 3)
+    kept : CurveFaces
+
+    Returns
+    -------
+    ndarray, shape (k, 3)
+    """
+    F, W0, P, T = kept
+    corners = V[F]  # (m', 3, 3): read once, for the normals and the centroids
+    # face_normals_areas(V, F): the cross products as np.cross rounds them, their
+    # lengths with the squares summed left to right
+    c = _cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    sq = c * c
+    length = np.sqrt((sq[:, 0] + sq[:, 1]) + sq[:, 2])
+    normals = c / np.where(length > 0, length, 1.0)[:, None]
+    areas = 0.5 * length
+    W = sp.csr_matrix((1.0 * areas[W0.indices], W0.indices, W0.indptr), shape=W0.shape)
+    n = unit(W @ normals)
+    h = unit(_cross(n, T))
+    # the faces' centroids, their corners summed in order (corners.mean(axis=1)), and the
+    # rows' sums of W as W.sum(axis=1) adds them (np.add.reduceat over each row's entries)
+    centroids = (corners[:, 0] + corners[:, 1] + corners[:, 2]) / 3.0
+    rows = np.flatnonzero(np.diff(W0.indptr))
+    total = np.zeros((W0.shape[0], 1))
+    total[rows, 0] = np.add.reduceat(W.data, W0.indptr[rows])
+    centroid_offset = (W @ centroids) / np.maximum(total, 1e-300) - P
+    flip = np.einsum("ij,ij->i", h, centroid_offset) < 0
+    h[flip] *= -1.0
+    return h
 
 
 def _adjacent_face_pairs(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -828,30 +1012,90 @@ def point_polyline_distance(P: np.ndarray, C: np.ndarray, closed: bool) -> np.nd
     -----
     Long inputs measure each point only against the segments that can be
     nearest (:func:`_near_segments`); the distances are the same floats as
-    those of measuring every segment.
+    those of measuring every segment. :class:`PolylineDistance` keeps the
+    polyline's side for points measured again.
     """
-    P = np.asarray(P, dtype=np.float64)
-    C = np.asarray(C, dtype=np.float64)
-    A = C
-    B = np.roll(C, -1, axis=0) if closed else C[1:]
-    A = A[: len(B)]
-    AB = B - A
-    ab2 = np.maximum(np.einsum("ij,ij->i", AB, AB), 1e-300)
-    if len(P) * len(A) <= _DENSE_PAIRS or len(A) == 0:
-        out = np.empty(len(P))
-        chunk = max(1, 2_000_000 // max(len(A), 1))
-        for s in range(0, len(P), chunk):
-            Q = P[s : s + chunk]
-            t = np.clip(np.einsum("pkj,kj->pk", Q[:, None, :] - A[None], AB) / ab2, 0.0, 1.0)
-            D = A[None] + t[..., None] * AB[None] - Q[:, None, :]
-            out[s : s + chunk] = np.sqrt(np.einsum("pkj,pkj->pk", D, D).min(axis=1))
-        return out
-    point, seg = _near_segments(P, A, AB)
-    return _segment_distances(P, A, AB, ab2, point, seg, len(P))
+    return PolylineDistance(C, closed)(P)
 
 
 #: Point-segment pairs up to which :func:`point_polyline_distance` measures all pairs.
 _DENSE_PAIRS = 4096
+
+
+class PolylineDistance:
+    """:func:`point_polyline_distance` to one polyline, its segments' values made once.
+
+    A solver keeps one per host curve (the host does not move), so a seam
+    gap measures only the seam: the segments, their midpoints and their
+    search tree are made once.
+
+    Parameters
+    ----------
+    C : ndarray, shape (k, 3)
+        Polyline vertices in order.
+    closed : bool
+        The polyline returns from ``C[-1]`` to ``C[0]``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> to_axis = PolylineDistance(np.array([[0.0, 0, 0], [1.0, 0, 0]]), closed=False)
+    >>> to_axis(np.array([[0.5, 2.0, 0.0], [3.0, 0.0, 0.0]]))
+    array([2., 2.])
+    """
+
+    def __init__(self, C: np.ndarray, closed: bool):
+        C = np.asarray(C, dtype=np.float64)
+        self.C, self.closed = C, bool(closed)
+        B = np.roll(C, -1, axis=0) if closed else C[1:]
+        self.A = C[: len(B)]
+        self.AB = B - self.A
+        self.ab2 = np.maximum(np.einsum("ij,ij->i", self.AB, self.AB), 1e-300)
+
+    def __call__(self, P: np.ndarray) -> np.ndarray:
+        """Distance of each point ``P`` (p, 3) to the polyline, shape (p,)."""
+        P = np.asarray(P, dtype=np.float64)
+        A, AB, ab2 = self.A, self.AB, self.ab2
+        if len(P) * len(A) <= _DENSE_PAIRS or len(A) == 0:
+            out = np.empty(len(P))
+            chunk = max(1, 2_000_000 // max(len(A), 1))
+            for s in range(0, len(P), chunk):
+                Q = P[s : s + chunk]
+                t = np.clip(np.einsum("pkj,kj->pk", Q[:, None, :] - A[None], AB) / ab2, 0.0, 1.0)
+                D = A[None] + t[..., None] * AB[None] - Q[:, None, :]
+                out[s : s + chunk] = np.sqrt(np.einsum("pkj,pkj->pk", D, D).min(axis=1))
+            return out
+        point, seg = _near_segments(P, A, AB, self._midpoints)
+        return _segment_distances(P, A, AB, ab2, point, seg, len(P))
+
+    @cached_property
+    def mean_segment(self) -> float:
+        """Mean segment length (:func:`igljoin.polyline.mean_segment`)."""
+        return mean_segment(self.C, self.closed)
+
+    @cached_property
+    def _midpoints(self) -> _Midpoints:
+        return _midpoints(self.A, self.AB)
+
+
+class _Midpoints(NamedTuple):
+    """The segments' side of :func:`_near_segments`: midpoints, half lengths, search tree."""
+
+    M: np.ndarray
+    ab2: np.ndarray
+    half: np.ndarray
+    half_max: np.floating
+    extent: float
+    tree: cKDTree
+
+
+def _midpoints(A: np.ndarray, AB: np.ndarray) -> _Midpoints:
+    """:class:`_Midpoints` of the segments from ``A`` along ``AB`` (each shape (k, 3))."""
+    M = A + 0.5 * AB
+    ab2 = np.maximum(np.einsum("ij,ij->i", AB, AB), 1e-300)
+    half = 0.5 * np.sqrt(ab2)
+    extent = max(float(np.abs(M).max()), float(half.max()))
+    return _Midpoints(M, ab2, half, half.max(), extent, cKDTree(M))
 
 
 def _segment_distances(P, A, AB, ab2, point, seg, p) -> np.ndarray:
@@ -882,43 +1126,47 @@ def _segment_distances(P, A, AB, ab2, point, seg, p) -> np.ndarray:
     return out
 
 
-def _near_segments(P: np.ndarray, A: np.ndarray, AB: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _near_segments(
+    P: np.ndarray, A: np.ndarray, AB: np.ndarray, kept: _Midpoints | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Point-segment pairs that include, for each point, every segment that can be nearest.
 
     A segment with midpoint ``M`` and half length ``r`` is at least
     ``|P − M| − r`` from ``P``. Measuring the segment with the nearest
     midpoint gives an upper bound ``d`` on the distance; a segment can only
     beat it if ``|P − M| ≤ d + r``, so the segments with midpoints within
-    ``d + max r`` (plus a margin far above rounding) are listed.
+    ``d + max r`` (plus a margin far above rounding) are listed. Whichever
+    midpoint is taken as the nearest where two are as near, every segment
+    whose distance can be the smallest is listed, so the smallest distance
+    is the same.
 
     Parameters
     ----------
     P : ndarray, shape (p, 3)
     A, AB : ndarray, shape (k, 3)
         Segment starts and vectors.
+    kept : _Midpoints, optional
+        ``_midpoints(A, AB)``, if already made.
 
     Returns
     -------
     point, seg : ndarray of int64, shape (c,)
         The pairs, every point at least once.
     """
-    k = len(A)
-    M = A + 0.5 * AB
-    ab2 = np.maximum(np.einsum("ij,ij->i", AB, AB), 1e-300)
-    half = 0.5 * np.sqrt(ab2)
-    tree = cKDTree(M)
-    _, nearest = tree.query(P)
-    upper = _segment_distances(P, A, AB, ab2, np.arange(len(P)), nearest, len(P))
-    scale = max(float(np.abs(P).max()), float(np.abs(M).max()), float(half.max()))
-    radius = upper + half.max() + 1e-9 * scale  # 1e-9: far above the rounding of any term
-    # the midpoints within each radius: ask for `count` neighbours, twice as many for the
-    # points whose last one is still inside their radius
-    point = np.arange(len(P))
-    found_point, found_seg = [], []
+    k, p = len(A), len(P)
+    M, ab2, half, half_max, extent, tree = _midpoints(A, AB) if kept is None else kept
+    # the `count` nearest midpoints of every point: the nearest gives the bound
     count = min(k, 8)
-    while point.size:
-        dist, idx = tree.query(P[point], k=count, distance_upper_bound=float(radius[point].max()))
-        dist, idx = dist.reshape(len(point), count), idx.reshape(len(point), count)
+    dist, idx = tree.query(P, k=count)
+    dist, idx = dist.reshape(p, count), idx.reshape(p, count)
+    upper = _segment_distances(P, A, AB, ab2, np.arange(p), idx[:, 0], p)
+    scale = max(float(np.abs(P).max()), extent)
+    radius = upper + half_max + 1e-9 * scale  # 1e-9: far above the rounding of any term
+    # the midpoints within each radius: twice as many neighbours for the points whose
+    # last one is still inside their radius
+    point = np.arange(p)
+    found_point, found_seg = [], []
+    while True:
         inside = dist <= radius[point, None]
         more = inside[:, -1] & (count < k)
         done = ~more
@@ -926,11 +1174,20 @@ def _near_segments(P: np.ndarray, A: np.ndarray, AB: np.ndarray) -> tuple[np.nda
         found_point.append(point[done][rows])
         found_seg.append(idx[done][rows, cols])
         point = point[more]
+        if not point.size:
+            return np.concatenate(found_point), np.concatenate(found_seg).astype(np.int64)
         count = min(k, 2 * count)
-    return np.concatenate(found_point), np.concatenate(found_seg).astype(np.int64)
+        dist, idx = tree.query(P[point], k=count, distance_upper_bound=float(radius[point].max()))
+        dist, idx = dist.reshape(len(point), count), idx.reshape(len(point), count)
 
 
-def seam_gap(seam_points: np.ndarray, host_points: np.ndarray, closed: bool) -> dict:
+def seam_gap(
+    seam_points: np.ndarray,
+    host_points: np.ndarray,
+    closed: bool,
+    *,
+    host: PolylineDistance | None = None,
+) -> dict:
     """Distance of the guest seam to the host curve.
 
     Parameters
@@ -940,6 +1197,9 @@ def seam_gap(seam_points: np.ndarray, host_points: np.ndarray, closed: bool) -> 
     host_points : ndarray, shape (k, 3)
         Host curve polyline.
     closed : bool
+    host : PolylineDistance, optional
+        ``PolylineDistance(host_points, closed)``, if already made (a solver
+        keeps its rigid host's).
 
     Returns
     -------
@@ -947,8 +1207,9 @@ def seam_gap(seam_points: np.ndarray, host_points: np.ndarray, closed: bool) -> 
         ``max``, ``mean`` (absolute), ``relative_max``, ``relative_mean``
         (divided by the mean host seam edge).
     """
-    d = point_polyline_distance(seam_points, host_points, closed)
-    mean_edge = mean_segment(host_points, closed)
+    host = PolylineDistance(host_points, closed) if host is None else host
+    d = host(seam_points)
+    mean_edge = host.mean_segment
     return {
         "max": float(d.max()),
         "mean": float(d.mean()),
@@ -964,6 +1225,7 @@ def folded_pairs(
     angle: float = 150.0,
     *,
     rest: FoldReference | None = None,
+    normals: np.ndarray | None = None,
 ) -> np.ndarray:
     """Adjacent face pairs whose normals turned against each other.
 
@@ -978,6 +1240,9 @@ def folded_pairs(
     rest : FoldReference, optional
         ``fold_reference(V0, F)``, if already made (a solver keeps its rest
         guest's).
+    normals : ndarray, shape (m, 3), optional
+        The unit face normals of ``V1``
+        (:func:`igljoin.frames.face_normals_areas`), if already made.
 
     Returns
     -------
@@ -988,7 +1253,7 @@ def folded_pairs(
     if not len(pairs):
         return pairs
     limit = np.cos(np.radians(angle))
-    n1, _ = face_normals_areas(V1, F)
+    n1 = face_normals_areas(V1, F)[0] if normals is None else normals
     c1 = _pair_cosines(n1, first, second)
     return pairs[(c1 < limit) & (c0 >= limit)]
 
@@ -1034,7 +1299,9 @@ def _pair_cosines(N: np.ndarray, first: np.ndarray, second: np.ndarray) -> np.nd
 def summary(values: np.ndarray) -> dict:
     """Mean, median, 95th percentile, min and max of finite values, as floats."""
     v = np.asarray(values, dtype=np.float64)
-    v = v[np.isfinite(v)]
+    finite = np.isfinite(v)
+    if not finite.all():
+        v = v[finite]
     if not v.size:
         return {"mean": None, "median": None, "p95": None, "min": None, "max": None}
     s = np.sort(v)
@@ -1042,7 +1309,8 @@ def summary(values: np.ndarray) -> dict:
     half = n // 2
     median = s[half] if n % 2 else (s[half - 1] + s[half]) / 2.0
     return {
-        "mean": float(v.mean()),
+        # v.mean(): the sum in v's order over the count, without the call's overhead
+        "mean": float(np.add.reduce(v) / n),
         "median": float(median),
         "p95": _percentile_sorted(s, 0.95),
         "min": float(s[0]),

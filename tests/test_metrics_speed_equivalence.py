@@ -330,7 +330,7 @@ def test_host_values_follow_the_arrays_and_are_kept_on_the_solver():
     solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
     a = solver.solve()
     kept = dict(solver.host_values.made)
-    assert {key[0] for key in kept} == {"band_fit", "inward", "dihedral"}
+    assert {key[0] for key in kept} == {"band_fit", "inward", "dihedral", "distance"}
     b = solver.solve()
     assert all(solver.host_values.made[key] is value for key, value in kept.items())
     # and they are what the plain functions give
@@ -650,3 +650,152 @@ def test_compiled_band_fit_columns_and_sums_are_the_einsums(joins, key, monkeypa
         _assert_same(a.frames.normal, b.frames.normal)
         assert (a.weights != b.weights).nnz == 0
         _assert_same(a.weights.indices, b.weights.indices)
+
+
+# -- what a solver keeps between solves: the same measures from fewer operations -------------
+
+
+def _seam_geometry(res, i=0):
+    sm = res.seams[i]
+    return SeamGeometry(
+        res.host.V, res.host.F, sm.host_curve, res.guest.V, res.guest.F, sm.guest_at_host, sm.closed
+    )
+
+
+def test_kept_curve_faces_give_the_guest_frames_of_seam_frames(joins):
+    rng = np.random.default_rng(11)
+    for _, res in joins.values():
+        seam = _seam_geometry(res)
+        kept = metrics.curve_faces(seam)
+        assert kept is not None
+        # the rest guest's faces, weights and tangents, used at other positions
+        for V in (res.guest.V, res.rest_guest.V, res.guest.V + rng.normal(size=res.guest.V.shape)):
+            moved = seam.with_guest(V)
+            full = frames.seam_frames(
+                V, seam.Fg, seam.guest_at_host, seam.closed, curve_points=seam.host_points
+            )
+            _assert_same(metrics._guest_inward(V, kept), full.inward)
+            _assert_same(
+                metrics.crease_angles(moved, guest_faces=kept), metrics.crease_angles(moved)
+            )
+
+
+def test_curve_faces_decline_a_face_repeating_a_vertex():
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    F = np.array([[0, 1, 2], [0, 2, 3], [0, 0, 3]])  # the last face repeats vertex 0
+    seam = SeamGeometry(V, F[:2], [0, 1], V, F, [0, 1], False)
+    assert metrics.curve_faces(seam) is None
+    clean = SeamGeometry(V, F[:2], [0, 1], V, F[:2], [0, 1], False)
+    kept = metrics.curve_faces(clean)
+    assert kept is not None
+    _assert_same(metrics.crease_angles(clean, guest_faces=kept), metrics.crease_angles(clean))
+
+
+@pytest.mark.parametrize("closed", [True, False])
+def test_a_kept_polyline_distance_measures_as_the_function(closed):
+    rng = np.random.default_rng(21 + closed)
+    t = np.linspace(0.0, 2 * np.pi, 90, endpoint=False)
+    C = np.column_stack([np.cos(t), np.sin(t), 0.1 * np.sin(3 * t)]) * 20.0
+    kept = metrics.PolylineDistance(C, closed)
+    for count in (5, 40, 300):  # the all-pairs path, then the pruned one, measured again
+        P = C[rng.integers(0, len(C), count)] + rng.normal(scale=0.5, size=(count, 3))
+        want = _ref_point_polyline_distance(P, C, closed)
+        _assert_same(kept(P), want)
+        _assert_same(metrics.point_polyline_distance(P, C, closed), want)
+        assert metrics.seam_gap(P, C, closed, host=kept) == metrics.seam_gap(P, C, closed)
+    assert kept.mean_segment == igljoin.polyline.mean_segment(C, closed)
+
+
+def test_kept_incidence_and_rigid_reference_give_the_plain_maps(joins):
+    for _, res in joins.values():
+        V0, V1, F = res.rest_guest.V, res.guest.V, res.guest.F
+        E = np.asarray(igl.edges(F), dtype=np.int64)
+        n = len(V0)
+        strain = metrics.edge_strain(V0, V1, E)
+        incidence = metrics.vertex_incidence(E, n)
+        _assert_same(
+            metrics.vertex_strain(E, strain, n, incidence=incidence),
+            metrics.vertex_strain(E, strain, n),
+        )
+        # a strain that is not finite everywhere leaves the kept incidence aside
+        broken = strain.copy()
+        broken[::7] = np.nan
+        got = metrics.vertex_strain(E, broken, n, incidence=incidence)
+        _assert_same(got, metrics.vertex_strain(E, broken, n))
+        assert not np.array_equal(got, metrics.vertex_strain(E, strain, n), equal_nan=True)
+        rest = metrics.rigid_reference(V0)
+        for W in (V1, V1[::-1].copy(), V0):
+            _assert_same(metrics._rigid_fit_to(rest, W)[0], rigid_fit(V0, W)[0])
+            _assert_same(metrics._rigid_fit_to(rest, W)[1], rigid_fit(V0, W)[1])
+            _assert_same(
+                metrics.nonrigid_displacement(V0, W, rest=rest),
+                metrics.nonrigid_displacement(V0, W),
+            )
+
+
+def test_folded_pairs_from_given_normals(joins):
+    for _, res in joins.values():
+        V0, F = res.rest_guest.V, res.guest.F
+        V1 = res.guest.V + np.where(np.arange(len(V0)) % 2, 3.0, -3.0)[:, None] * [0, 0, 1]
+        normals, _ = frames.face_normals_areas(V1, F)
+        got = metrics.folded_pairs(V0, V1, F, rest=metrics.fold_reference(V0, F), normals=normals)
+        want = metrics.folded_pairs(V0, V1, F)
+        assert len(want)  # the push folds pairs
+        _assert_same(got, want)
+
+
+def test_coordinate_major_arrays_measure_as_the_arrays(joins):
+    """The measures copy their inputs coordinate-major; given such arrays they copy nothing
+    and give the same values."""
+    for _, res in joins.values():
+        V1, F = res.guest.V, res.guest.F
+        E = np.asarray(igl.edges(F), dtype=np.int64)
+        Vc, Fc, Ec = (np.ascontiguousarray(A.T).T for A in (V1, F, E))
+        for got, want in zip(frames.face_normals_areas(Vc, Fc), frames.face_normals_areas(V1, F)):
+            _assert_same(got, want)
+        _assert_same(metrics.edge_lengths(Vc, Ec), metrics.edge_lengths(V1, E))
+
+
+def test_a_joins_meshes_are_what_the_checked_constructor_makes(joins):
+    for _, res in joins.values():
+        for mesh in (res.guest, res.rest_guest):
+            checked = Mesh(
+                mesh.V, mesh.F, mesh.vertex_attributes, mesh.face_attributes, name=mesh.name
+            )
+            for name in ("V", "F"):
+                _assert_same(getattr(mesh, name), getattr(checked, name))
+                assert not getattr(mesh, name).flags.writeable
+                assert getattr(mesh, name).flags.c_contiguous
+            for kind in ("vertex_attributes", "face_attributes"):
+                got, want = getattr(mesh, kind), getattr(checked, kind)
+                assert list(got) == list(want)
+                for key in got:
+                    _assert_same(got[key], want[key])
+                    assert not got[key].flags.writeable
+        # the deformed guest owns its positions; the area ratio is the result's own, writable
+        assert res.guest.V.base is None and res.area_ratio.flags.writeable
+        assert not np.shares_memory(res.area_ratio, res.guest.face_attributes["area_ratio"])
+
+
+def test_results_share_the_rest_arrays_but_cannot_write_them():
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.4)
+    solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    a, b = solver.solve(), solver.solve()
+    assert a.rest_guest is not b.rest_guest and a.guest is not b.guest
+    assert np.shares_memory(a.rest_guest.V, b.rest_guest.V)
+    assert np.shares_memory(a.guest.F, b.rest_guest.F)
+    for array in (a.rest_guest.V, a.rest_guest.F, a.guest.F):
+        with pytest.raises(ValueError):
+            array.flags.writeable = True  # a view of a read-only copy: no way to write
+    _assert_same(a.rest_guest.V, solver.corr.V)
+    _assert_same(a.guest.F, solver.corr.F)
+
+
+def test_a_solve_gone_non_finite_is_refused_by_the_mesh_checks():
+    from igljoin.measure_join import _deformed_guest
+
+    s = phantoms.paper_sample("partial_patch", "equal", resolution=0.4)
+    X = s.guest.V.copy()
+    X[3] = np.nan
+    with pytest.raises(igljoin.MeshError, match="deformed guest: 1 vertices have NaN"):
+        _deformed_guest(X, s.guest.F, {}, {})
