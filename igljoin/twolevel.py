@@ -822,12 +822,13 @@ class TwoLevelModel:
 #: over those with ``P`` alone: tube / patch 0.9-1.1 / 0.7-1.2 at 10k, 0.90-0.96 / 0.55-0.63
 #: at 20k, 0.69-0.96 / 0.40-0.42 at 40k, 0.71 / 0.51-0.58 at 100k). Below, it was measured
 #: again with the model projected from the operator rows (four runs, load 0.5-2): 5k tube /
-#: patch 1.17-1.24 / 1.12-1.75, 10k 0.96-1.06 / 0.94-1.04; on the six paper samples (1.1k-2.4k free vertices,
-#: ``coarse_study.py paper``) the whole join's median 1.42x ``P``'s (132 to 188 ms), 1.12x
-#: built once: it halves the end-to-end tubes' iterations (107 / 102 to 60 / 52) but its
-#: builds cost 18-22 ms each, about what those iterations cost, it saves little on the
-#: patches (35 / 54 to 31 / 40) and nothing on the longer tube, and the longer patch
-#: rebuilds it 33 times (or, built once, needs 275 iterations against 235).
+#: patch 1.17-1.24 / 1.12-1.75, 10k 0.96-1.06 / 0.94-1.04; on the six paper samples
+#: (1.1k-2.4k free vertices, ``coarse_study.py paper``) the whole join's median 1.42x
+#: ``P``'s (132 to 188 ms), 1.12x built once: it halves the end-to-end tubes' iterations
+#: (107 / 102 to 60 / 52) but a build costs 17-24 ms there (9-11 on the patches), about what
+#: those iterations cost, it saves little on the patches (35 / 54 to 31 / 40) and nothing on
+#: the longer tube, and the longer patch rebuilds it 33 times (or, built once, needs 275
+#: iterations against 235).
 AUTO_FROM_VERTICES = 20_000
 
 #: The two-level model ``preconditioner="auto"`` uses from :data:`AUTO_FROM_VERTICES`:
