@@ -11,6 +11,7 @@ only, not on the positions: :func:`row_clusters` (on the operators) and
 :func:`block_pattern` find them once, and :func:`project_rows` and
 :func:`project_rotation` recompute the values of ``A_c``'s (w, w) blocks at
 a rebuild, one pass over the operators' rows without forming ``J``.
+:func:`edge_lengths` weighs the graph the clusters are grown on.
 :func:`restrict` and :func:`prolong` apply ``Aᵀ`` and ``A`` from the blocks.
 """
 
@@ -20,6 +21,7 @@ import numba as nb
 import numpy as np
 
 __all__ = [
+    "edge_lengths",
     "row_clusters",
     "block_pattern",
     "project_rows",
@@ -42,6 +44,45 @@ def _position(out, start, stop, c):
         else:
             hi = mid
     return lo
+
+
+@nb.njit(cache=True)
+def edge_lengths(indptr, indices, X):
+    """A graph's off-diagonal pattern with every entry's length ``|x_i − x_j|``.
+
+    Parameters
+    ----------
+    indptr, indices : ndarray of int
+        The graph's CSR pattern, shape (m + 1,) and (nnz,).
+    X : ndarray, shape (m, 3)
+        Positions.
+
+    Returns
+    -------
+    ptr : ndarray of int64, shape (m + 1,)
+    cols : ndarray of int64, shape (k,)
+        The pattern without its diagonal, in the graph's order.
+    length : ndarray, shape (k,)
+        ``|x_i − x_j|`` plus 1e-300 (a zero-length edge stays an edge).
+    """
+    m = len(indptr) - 1
+    ptr = np.zeros(m + 1, dtype=np.int64)
+    cols = np.empty(len(indices), dtype=np.int64)
+    length = np.empty(len(indices))
+    q = 0
+    for i in range(m):
+        for p in range(indptr[i], indptr[i + 1]):
+            j = indices[p]
+            if j == i:
+                continue
+            a = X[i, 0] - X[j, 0]
+            b = X[i, 1] - X[j, 1]
+            c = X[i, 2] - X[j, 2]
+            cols[q] = j
+            length[q] = np.sqrt(a * a + b * b + c * c) + 1e-300
+            q += 1
+        ptr[i + 1] = q
+    return ptr, cols[:q].copy(), length[:q].copy()
 
 
 @nb.njit(cache=True)

@@ -194,10 +194,7 @@ def clusters(X: np.ndarray, graph: sp.spmatrix, size: int) -> np.ndarray:
     X = np.asarray(X, dtype=np.float64)
     m = len(X)
     size = max(int(size), 1)
-    G = sp.coo_matrix(graph)
-    keep = G.row != G.col
-    r, c = G.row[keep], G.col[keep]
-    W = sp.csr_matrix((np.linalg.norm(X[r] - X[c], axis=1) + 1e-300, (r, c)), shape=(m, m))
+    W = _edge_lengths(X, graph)
     lo = X.min(axis=0)
     h = (float(np.max(X.max(axis=0) - lo)) + 1e-300) / max(m / size, 1.0) ** (1.0 / 3.0)
     for _ in range(8):
@@ -213,8 +210,10 @@ def clusters(X: np.ndarray, graph: sp.spmatrix, size: int) -> np.ndarray:
     offset = X - mean[cell]
     order = np.lexsort((np.einsum("ij,ij->i", offset, offset), cell))
     seeds = order[np.r_[True, cell[order][1:] != cell[order][:-1]]]
+    # W is symmetric (a symmetric pattern, |x_i − x_j| = |x_j − x_i|): its directed
+    # search is the undirected one, without the transpose scipy would add (half the time)
     _, _, source = csgraph.dijkstra(
-        W, directed=False, indices=seeds, min_only=True, return_predecessors=True
+        W, directed=True, indices=seeds, min_only=True, return_predecessors=True
     )
     lost = source < 0
     if lost.any():
@@ -224,6 +223,19 @@ def clusters(X: np.ndarray, graph: sp.spmatrix, size: int) -> np.ndarray:
         source[lost] = m + part
     _, labels = np.unique(source, return_inverse=True)
     return labels.astype(np.int64).ravel()
+
+
+def _edge_lengths(X: np.ndarray, graph: sp.spmatrix) -> sp.csr_matrix:
+    """``graph``'s pattern without its diagonal, each entry ``|x_i − x_j|``: shape (m, m).
+
+    One compiled pass over a CSR ``graph``'s own index arrays
+    (:func:`igljoin.coarse_kernels.edge_lengths`): at 10k guest vertices
+    the conversion through COO and numpy's gathers had taken two thirds of
+    the clusters' time.
+    """
+    G = graph if sp.isspmatrix_csr(graph) else sp.csr_matrix(graph)
+    ptr, cols, length = ck.edge_lengths(G.indptr, G.indices, np.ascontiguousarray(X))
+    return sp.csr_matrix((length, cols, ptr), shape=(len(X), len(X)))
 
 
 def _grid_cells(keys: np.ndarray) -> np.ndarray:
@@ -808,7 +820,15 @@ class TwoLevelModel:
 #: Free guest vertices from which ``preconditioner="auto"`` uses :data:`AUTO_MODEL`
 #: (``pipelines/coarse_study.py time``, one BLAS thread, the iteration's seconds with it
 #: over those with ``P`` alone: tube / patch 0.9-1.1 / 0.7-1.2 at 10k, 0.90-0.96 / 0.55-0.63
-#: at 20k, 0.69-0.96 / 0.40-0.42 at 40k, 0.71 / 0.51-0.58 at 100k).
+#: at 20k, 0.69-0.96 / 0.40-0.42 at 40k, 0.71 / 0.51-0.58 at 100k). Below, it was measured
+#: again with the model projected from the operator rows (four runs, load 0.5-2): 5k tube /
+#: patch 1.17-1.24 / 1.12-1.75, 10k 0.96-1.06 / 0.94-1.04; on the six paper samples
+#: (1.1k-2.4k free vertices, ``coarse_study.py paper``) the whole join's median 1.42x
+#: ``P``'s (132 to 188 ms), 1.12x built once: it halves the end-to-end tubes' iterations
+#: (107 / 102 to 60 / 52) but a build costs 17-24 ms there (9-11 on the patches), about what
+#: those iterations cost, it saves little on the patches (35 / 54 to 31 / 40) and nothing on
+#: the longer tube, and the longer patch rebuilds it 33 times (or, built once, needs 275
+#: iterations against 235).
 AUTO_FROM_VERTICES = 20_000
 
 #: The two-level model ``preconditioner="auto"`` uses from :data:`AUTO_FROM_VERTICES`:

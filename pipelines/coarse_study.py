@@ -7,6 +7,7 @@ Usage::
     python pipelines/coarse_study.py line tube 10000                # energy along steps
     python pipelines/coarse_study.py time tube 10000 [40000 ...]    # seconds, P against rebuilt
     python pipelines/coarse_study.py time tube 10000 cluster_size=40 rebuild_angle=0.3
+    python pipelines/coarse_study.py paper 5                        # the six paper samples
 
 ``run`` joins the end-to-end tube (``tube``) or the partial patch
 (``patch``) with about the given number of guest vertices four ways from
@@ -25,6 +26,15 @@ whole iteration, of the coarse set-up (clusters and first build) and of the
 rebuilds apart, and the energy gap to ``P``'s run. With ``IGLJOIN_TREE``
 set to another checkout, that checkout's package is timed (the same script
 on two versions of the code, alternated by the caller).
+
+``paper`` joins the six paper samples whole (``igljoin.JoinSolver`` and
+``solve``, as the benchmark's median join) three ways, alternated over the
+given number of rounds: the default (``P`` alone below
+``igljoin.twolevel.AUTO_FROM_VERTICES``), the ``"auto"`` model forced on
+(the threshold set to 0) and bending motions built once (no rebuild). It
+prints per sample the iterations, the median join in ms, the model's own
+seconds (clusters, values, projection, factorization) and builds, and the
+energy gap to a long plain run, then the median join over the samples.
 
 ``pcg`` counts the conjugate-gradient iterations that solve the
 Gauss–Newton model at the default run's minimum (random right-hand side,
@@ -242,6 +252,65 @@ def line(kind: str, vertices: float, at=(0, 20, 60)) -> None:
             )
 
 
+#: The paper samples' preconditioner choices ``paper`` compares: the threshold and model
+#: ``"auto"`` reads.
+PAPER = {
+    "P": (twolevel.AUTO_FROM_VERTICES, dict(TIMED)),
+    "auto forced": (0, dict(TIMED)),
+    "bending once": (0, dict(bending=True)),
+}
+
+
+def paper(rounds: int) -> None:
+    import statistics
+
+    cases = [
+        (sc, ln) for sc in ("end_to_end", "partial_patch") for ln in ("shorter", "equal", "longer")
+    ]
+    samples = [phantoms.paper_sample(sc, ln) for sc, ln in cases]
+
+    def join(s, name):
+        twolevel.AUTO_FROM_VERTICES, twolevel.AUTO_MODEL = PAPER[name]
+        t0 = time.perf_counter()
+        solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+        r = solver.solve()
+        return time.perf_counter() - t0, r, solver
+
+    names = list(PAPER)
+    for s in samples:  # compiled kernels loaded, caches warm: not timed
+        for name in names:
+            join(s, name)
+    print(
+        "| sample | " + " | ".join(f"{n}: it / ms / model ms (builds) / gap" for n in names) + " |"
+    )
+    print("|---|" + "---|" * len(names))
+    medians = {n: [] for n in names}
+    for (sc, ln), s in zip(cases, samples):
+        solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+        e_ref = solver.solve(acceleration=0, energy_tolerance=1e-12, max_iterations=30000)
+        e_ref = e_ref.energy[-1]
+        seconds, last = {n: [] for n in names}, {}
+        for k in range(rounds):
+            for name in names if k % 2 == 0 else names[::-1]:
+                t, r, solver = join(s, name)
+                seconds[name].append(t)
+                last[name] = (r, solver.last_model)
+        cells = []
+        for name in names:
+            r, model = last[name]
+            ms = 1000 * statistics.median(seconds[name])
+            medians[name].append(ms)
+            own = 0.0 if model is None else 1000 * sum(model.seconds.values())
+            builds = 0 if model is None else model.factorizations
+            gap = (r.energy[-1] - e_ref) / e_ref
+            cells.append(f"{r.iterations} / {ms:.1f} / {own:.1f} ({builds}) / {gap:+.1e}")
+        print(f"| {sc}/{ln} | " + " | ".join(cells) + " |", flush=True)
+    print(
+        "median join ms: "
+        + ", ".join(f"{n} {statistics.median(v):.1f}" for n, v in medians.items())
+    )
+
+
 def main(argv: list) -> None:
     # key=value arguments replace TwoLevelModel arguments of TIMED (numbers or None)
     for arg in [a for a in argv if "=" in a]:
@@ -250,6 +319,9 @@ def main(argv: list) -> None:
         if key in ("cluster_size", "first_rebuild", "max_rebuilds") and value != "None":
             TIMED[key] = int(TIMED[key])
     argv = [a for a in argv if "=" not in a]
+    if argv[0] == "paper":
+        paper(int(argv[1]) if len(argv) > 1 else 5)
+        return
     what, kind, sizes = argv[0], argv[1], [float(v) for v in argv[2:]]
     {"run": table, "pcg": pcg, "time": timed}.get(what, lambda k, s: line(k, s[0]))(kind, sizes)
 

@@ -37,6 +37,23 @@ def test_clusters_are_connected_and_about_the_size_asked(patch):
             assert parts == 1
 
 
+def test_the_clusters_graph_is_weighted_by_edge_length_without_its_diagonal(patch):
+    ls = patch.solver
+    X = patch.initial_guess()[ls.free]
+    G = sp.csr_matrix(ls.P[ls.free][:, ls.free])
+    W = twolevel._edge_lengths(X, G)
+    # the reference: every off-diagonal entry of G, weighed by numpy
+    C = sp.coo_matrix(G)
+    off = C.row != C.col
+    r, c = C.row[off], C.col[off]
+    ref = sp.csr_matrix((np.linalg.norm(X[r] - X[c], axis=1), (r, c)), shape=G.shape)
+    assert W.nnz == ref.nnz and not W.diagonal().any()
+    # the two sum three squares in their own order: a few ulps of lengths of order 1
+    assert abs(W - ref).max() <= 1e-12
+    # symmetric, as the directed search the clusters make assumes
+    assert abs(W - W.T).max() == 0.0
+
+
 def test_grid_cells_are_numbered_as_the_rows_unique():
     rng = np.random.default_rng(4)
     small = rng.integers(0, 7, (500, 3))
