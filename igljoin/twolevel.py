@@ -741,23 +741,20 @@ class TwoLevelModel:
         self._model_seconds = 0.0
         for term, (K, of_K, of_L), wide in zip(ls.terms, self._patterns, self._wide):
             t0 = time.perf_counter()
-            rows, rotation = factor_rows(term, state, self._cache)
+            (_, directions, weights), rotation = factor_rows(term, state, self._cache)
             self._model_seconds += time.perf_counter() - t0
-            for _, directions, weights in rows:
-                weights = np.ascontiguousarray(weights, dtype=np.float64)
-                directions = (
-                    np.zeros((0, 3, 3))
-                    if directions is None
-                    else np.ascontiguousarray(directions, dtype=np.float64)
-                )
-                args = (K.indptr, K.indices, K.data, directions)
-                if wide:
-                    values = ck.motion_rows_of(*args, of_K[0], of_K[2], where, B)
-                    wide_rows.append(
-                        _motion_matrix(values, of_K[0], of_K[1], weights.shape[1], w, a)
-                    )
-                    wide_weights.append(weights.ravel())
-                    continue
+            weights = np.ascontiguousarray(weights, dtype=np.float64)
+            directions = (
+                np.zeros((0, 3, 3))
+                if directions is None
+                else np.ascontiguousarray(directions, dtype=np.float64)
+            )
+            args = (K.indptr, K.indices, K.data, directions)
+            if wide:
+                values = ck.motion_rows_of(*args, of_K[0], of_K[2], where, B)
+                wide_rows.append(_motion_matrix(values, of_K[0], of_K[1], weights.shape[1], w, a))
+                wide_weights.append(weights.ravel())
+            else:
                 ck.project_rows(*args, weights, *of_K, bptr, bcols, where, B, out)
             if rotation is not None:
                 (Lptr, Lind, _), *_ = rotation_pattern(term, self._cache)
