@@ -276,13 +276,6 @@ def gauss_newton_factors(terms: list, state: LocalState, n: int, cache: dict | N
     return parts
 
 
-def _unit_directions(term) -> bool:
-    """Whether :func:`factor_rows` gives ``term``'s rows the unit directions (``K ⊗ I₃``)."""
-    if isinstance(term, StretchTerm):
-        return False
-    return not (isinstance(term, SmoothJoinTerm) and term.mode != "paper")
-
-
 def row_directions(term) -> int:
     """Factor rows per row of ``term``'s operator ``K`` (:func:`factor_rows`' ``D``).
 
@@ -314,8 +307,10 @@ def factor_entries(term) -> int:
     int
     """
     nnz = sp.csr_matrix(term.K).nnz
-    # K ⊗ I₃ holds one entry per entry of K in each of its three rows, K_r ⊗ d three
-    nnz *= 3 if _unit_directions(term) else 3 * row_directions(term)
+    D = row_directions(term)
+    # K ⊗ I₃ (D = 3) holds one entry per entry of K in each of its three rows; each of the
+    # D factors of rows K_r ⊗ d three
+    nnz *= 3 if D == 3 else 3 * D
     if isinstance(term, ShapeTerm) and term.rotation_aware:
         return nnz + 9 * sp.csr_matrix(term.L).nnz
     return nnz
