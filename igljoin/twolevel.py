@@ -464,8 +464,9 @@ class TwoLevelModel:
     built_at : list of int
         Iteration of every build.
     seconds : dict
-        ``clusters``, ``model`` (the Gauss–Newton model's values), ``coarse``
-        (``Aᵀ H A``) and ``factor`` times, summed over the builds.
+        ``clusters``, ``model`` (the Gauss–Newton model's values, and the
+        balancing form's factors), ``coarse`` (``Aᵀ H A``) and ``factor``
+        times, summed over the builds.
     coarse_entries : int or None
         Entries of the coarse system counted at the first refresh (an upper
         bound with band rows kept apart: their rows of zero weight are left
@@ -521,7 +522,6 @@ class TwoLevelModel:
         self._clusters = None
         self.motions = None
         self.factors = None
-        self._model_seconds = 0.0
         self.built_rotations = None
         self.coarse_factor = None
         self.factorizations = 0
@@ -585,10 +585,14 @@ class TwoLevelModel:
             blocks = np.concatenate([blocks, _bending_blocks(X, self.labels)], axis=2)
         self.motions = np.ascontiguousarray(blocks)
         del blocks
+        model = 0.0
         if self.balancing:
             # the balancing form's products with H need the factors themselves
+            t2 = time.perf_counter()
             self.factors = gauss_newton_factors(ls.terms, state, ls.n, self._cache)
-        coarse = self._project(state)
+            model = time.perf_counter() - t2
+        coarse, values = self._project(state)
+        model += values
         t3 = time.perf_counter()
         self.coarse_factor = self._factor(*coarse)
         self.factorizations += 1
@@ -597,9 +601,9 @@ class TwoLevelModel:
             self.built_rotations = state.rotations[ls.free].copy()
         t4 = time.perf_counter()
         self.seconds["clusters"] += t1 - t0
-        # _project splits its time between the model's values and the projection
-        self.seconds["coarse"] += t3 - t1 - self._model_seconds
-        self.seconds["model"] += self._model_seconds
+        # the model's values (and the balancing form's factors) apart from the projection
+        self.seconds["coarse"] += t3 - t1 - model
+        self.seconds["model"] += model
         self.seconds["factor"] += t4 - t3
         return first
 
@@ -724,11 +728,12 @@ class TwoLevelModel:
 
         Returns
         -------
-        S : scipy.sparse.csr_matrix, shape (w a, w a)
-            ``A_c`` (its local part with wide terms), ridge included.
-        U : scipy.sparse.csr_matrix, shape (rows, w a), or None
-            The wide terms' rows ``J A``.
-        weights : ndarray, shape (rows,), or None
+        coarse : (scipy.sparse.csr_matrix, scipy.sparse.csr_matrix or None, ndarray or None)
+            ``(S, U, weights)``: ``S`` of shape (w a, w a), ``A_c`` (its local
+            part with wide terms), ridge included; ``U`` of shape (rows, w a),
+            the wide terms' rows ``J A``, and their ``weights`` (rows,).
+        seconds : float
+            Time spent on the model's values (:func:`igljoin.newton.factor_rows`).
         """
         ls = self.solver
         a = self._clusters
@@ -738,11 +743,11 @@ class TwoLevelModel:
         bptr, bcols, lower, upper = self._blocks
         out = np.zeros((len(bcols), w, w))
         wide_rows, wide_weights = [], []
-        self._model_seconds = 0.0
+        seconds = 0.0
         for term, (K, of_K, of_L), wide in zip(ls.terms, self._patterns, self._wide):
             t0 = time.perf_counter()
             (_, directions, weights), rotation = factor_rows(term, state, self._cache)
-            self._model_seconds += time.perf_counter() - t0
+            seconds += time.perf_counter() - t0
             weights = np.ascontiguousarray(weights, dtype=np.float64)
             directions = (
                 np.zeros((0, 3, 3))
@@ -774,7 +779,7 @@ class TwoLevelModel:
                 minlength=w * a,
             )
         Ac.setdiag(Ac.diagonal() + _RIDGE * diagonal.mean())
-        return Ac, U, weights
+        return (Ac, U, weights), seconds
 
     @property
     def A(self) -> sp.csr_matrix:
