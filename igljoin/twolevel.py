@@ -569,7 +569,7 @@ class TwoLevelModel:
             self._where[ls.free] = np.arange(len(ls.free))
             self._clusters = int(self.labels.max()) + 1
             self._wide = self._count(self._clusters, 9 if self.bending else 6)
-            if self.model_entries > self._limit():
+            if self.model_entries > self._limit()[1]:
                 self.seconds["clusters"] += time.perf_counter() - t0
                 message = self._too_large()
                 if not self.fall_back:
@@ -665,9 +665,14 @@ class TwoLevelModel:
         self.model_entries = self.coarse_entries + held
         return wide
 
-    def _limit(self) -> int:
-        """The count past which this model is not built (read when it is counted)."""
-        return AUTO_MAX_MODEL_ENTRIES if self.fall_back else MAX_MODEL_ENTRIES
+    def _limit(self) -> tuple:
+        """The count past which this model is not built, ``(name, value)``.
+
+        Read when it is counted (a changed module value applies).
+        """
+        if self.fall_back:
+            return "AUTO_MAX_MODEL_ENTRIES", AUTO_MAX_MODEL_ENTRIES
+        return "MAX_MODEL_ENTRIES", MAX_MODEL_ENTRIES
 
     def _too_large(self) -> str:
         """The refusal's message: the count, the limit and the ways out."""
@@ -677,11 +682,11 @@ class TwoLevelModel:
             else "linear_solver='auto' with Pardiso installed (the smooth join's band rows "
             "are then kept out of the coarse matrix), "
         )
-        name = "AUTO_MAX_MODEL_ENTRIES" if self.fall_back else "MAX_MODEL_ENTRIES"
+        name, limit = self._limit()
         return (
             f"the two-level preconditioner's model would hold {self.model_entries:,} entries "
             f"(its coarse system {self.coarse_entries:,}), more than "
-            f"igljoin.twolevel.{name} = {self._limit():,} (about "
+            f"igljoin.twolevel.{name} = {limit:,} (about "
             f"{_BYTES_PER_ENTRY * self.model_entries / 1e9:.0f} GB at its first build): use "
             "preconditioner='factored' (or 'auto', which then keeps the factored form), "
             f"{pardiso}or raise igljoin.twolevel.{name}"
