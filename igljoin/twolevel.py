@@ -42,14 +42,8 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from . import coarse_kernels as ck
-from .errors import OptionsError, SolveError
-from .linsolve import (
-    AugmentedQuadratic,
-    FixedQuadratic,
-    _Pardiso,
-    _PardisoError,
-    available_backends,
-)
+from .errors import OptionsError
+from .linsolve import AugmentedQuadratic, FixedQuadratic, available_backends
 from .newton import (
     dofs,
     factor_entries,
@@ -154,19 +148,18 @@ class _CoarseAugmented(AugmentedQuadratic):
             shape=(n + len(keep), n + len(keep)),
         )
         del rows, upper, at
-        try:
-            self._pardiso = _Pardiso(A, indefinite=True)
-        except _PardisoError as exc:
-            raise SolveError(
-                f"{exc}; the coarse system could not be factored: use preconditioner='factored'"
-            ) from exc
-        probe = np.ones((n, 1))
-        x = self.solve_free(probe)
-        if not np.isfinite(x).all() or self.residual(x, probe) > self.PROBE_RESIDUAL:
-            raise SolveError(
-                f"the coarse system could not be factored ({self._pardiso.perturbed} pivots "
-                "of its augmented system were perturbed): use preconditioner='factored'"
-            )
+        self._factor_augmented(A)
+
+    def _refused(self, exc: Exception) -> str:
+        """The message when Pardiso reports the error ``exc``: the coarse system's."""
+        return f"{exc}; the coarse system could not be factored: use preconditioner='factored'"
+
+    def _unsound(self, perturbed: int) -> str:
+        """The message when the probe solve fails: the coarse system's."""
+        return (
+            f"the coarse system could not be factored ({perturbed} pivots of its augmented "
+            "system were perturbed): use preconditioner='factored'"
+        )
 
 
 def clusters(X: np.ndarray, graph: sp.spmatrix, size: int) -> np.ndarray:
