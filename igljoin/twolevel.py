@@ -651,7 +651,13 @@ class TwoLevelModel:
         self._blocks = ck.block_pattern(local, a)
         self.coarse_entries = int(w * w * len(self._blocks[1]) + wide_entries)
         # besides the coarse system: the operators' cluster patterns, every free vertex's
-        # motions and, for the balancing form, the factors themselves
+        # motions and, for the balancing form, the factors themselves. Of the patterns only
+        # the slots (one per operator entry) are counted, not row_clusters' lists of the
+        # clusters each row reaches nor their row pointers (together 26-32 % of the count
+        # of the bending model on 1k-10k tubes and patches): the bytes per entry of
+        # MAX_MODEL_ENTRIES's comment were measured against the count without them, so
+        # the memory they take is inside those bytes; counting them now would move every
+        # measured count and limit with it
         held = operators + 3 * w * len(self.labels)
         if self.balancing:
             held += sum(factor_entries(t) for t in self.solver.terms)
