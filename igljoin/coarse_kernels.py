@@ -338,6 +338,20 @@ def _add_pairs(blocks, pairs, JA, q, wr):
 
 
 @nb.njit(cache=True)
+def _row_buffers(ptr, w):
+    """The most clusters a row reaches and the per-row buffers of that size.
+
+    Returns ``(most, JA, pairs)``: ``JA`` of shape (most, w) for a row's
+    ``J_r A`` and ``pairs`` of shape (most²,) for its blocks
+    (:func:`_pair_blocks`), ``ptr`` being :func:`row_clusters`'s.
+    """
+    most = 0
+    for r in range(len(ptr) - 1):
+        most = max(most, ptr[r + 1] - ptr[r])
+    return most, np.zeros((most, w)), np.zeros(most * most, dtype=np.int64)
+
+
+@nb.njit(cache=True)
 def project_rows(
     indptr, indices, data, directions, weights, ptr, clusters, slot, bptr, bcols, where, B, blocks
 ):
@@ -370,12 +384,8 @@ def project_rows(
     """
     w = B.shape[2]
     unit = directions.shape[0] == 0
-    most = 0
-    for r in range(len(ptr) - 1):
-        most = max(most, ptr[r + 1] - ptr[r])
+    most, JA, pairs = _row_buffers(ptr, w)
     KB = np.zeros((most, 3, w))
-    JA = np.zeros((most, w))
-    pairs = np.zeros(most * most, dtype=np.int64)
     for r in range(len(ptr) - 1):
         q = ptr[r + 1] - ptr[r]
         if q == 0:
@@ -427,11 +437,7 @@ def project_rotation(indptr, indices, values, ptr, clusters, slot, bptr, bcols, 
         As :func:`project_rows`'s.
     """
     w = B.shape[2]
-    most = 0
-    for r in range(len(ptr) - 1):
-        most = max(most, ptr[r + 1] - ptr[r])
-    JA = np.zeros((most, w))
-    pairs = np.zeros(most * most, dtype=np.int64)
+    _, JA, pairs = _row_buffers(ptr, w)
     for r in range(len(ptr) - 1):
         q = ptr[r + 1] - ptr[r]
         if q == 0:
@@ -478,6 +484,10 @@ def motion_rows_of(indptr, indices, data, directions, ptr, slot, where, B):
     at = 0
     for r in range(len(ptr) - 1):
         q = ptr[r + 1] - ptr[r]
+        # one pass over the row per direction, summing (K_rp d_c) B_vc: the rows kept apart
+        # are in practice the smooth join's band rows, one direction each, where a K_r B
+        # summed once (as project_rows does) saves nothing; for several directions it
+        # would round the values differently
         for d in range(D):
             for p in range(indptr[r], indptr[r + 1]):
                 s = slot[p]

@@ -557,20 +557,40 @@ class AugmentedQuadratic(_FixedRows):
             return
         FixedQuadratic.made += 1
         A = sp.bmat([[self.Sff, self.Kft], [self.Kf, sp.diags(-1.0 / self.cw)]], format="csr")
+        self._factor_augmented(A)
+
+    def _factor_augmented(self, A: sp.spmatrix) -> None:
+        """Factor the augmented matrix ``A`` with Pardiso's LDLᵀ and check it by a probe solve.
+
+        The probe solves ``Q_ff x = 1`` (through ``A``); a result that is not
+        finite or leaves a relative residual above :attr:`PROBE_RESIDUAL` is
+        a failed factorization. Both failures raise ``SolveError`` with
+        :meth:`_refused`'s and :meth:`_unsound`'s messages.
+
+        Parameters
+        ----------
+        A : sparse matrix, shape (n_free + r, n_free + r)
+            ``[[S_ff, K_fᵀ], [K_f, −(c W)⁻¹]]``; only its upper triangle is read.
+        """
         try:
             self._pardiso = _Pardiso(A, indefinite=True)
         except _PardisoError as exc:
-            raise SolveError(
-                f"{exc}; the deformation system could not be factored as an augmented "
-                "system: use linear_solver='cholespy' or 'igl'"
-            ) from exc
+            raise SolveError(self._refused(exc)) from exc
         probe = np.ones((self.free.size, 1))
         x = self.solve_free(probe)
         if not np.isfinite(x).all() or self.residual(x, probe) > self.PROBE_RESIDUAL:
-            raise SolveError(
-                f"{_NOT_FACTORED} ({self._pardiso.perturbed} pivots of the augmented system "
-                "were perturbed)"
-            )
+            raise SolveError(self._unsound(self._pardiso.perturbed))
+
+    def _refused(self, exc: Exception) -> str:
+        """The message when Pardiso reports the error ``exc`` while factoring."""
+        return (
+            f"{exc}; the deformation system could not be factored as an augmented "
+            "system: use linear_solver='cholespy' or 'igl'"
+        )
+
+    def _unsound(self, perturbed: int) -> str:
+        """The message when the probe solve fails, ``perturbed`` pivots perturbed."""
+        return f"{_NOT_FACTORED} ({perturbed} pivots of the augmented system were perturbed)"
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
         """``Q_ff x`` for ``x`` of shape (n_free, k), without ``Q_ff``."""

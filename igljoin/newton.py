@@ -92,9 +92,9 @@ def _index_arrays(cols: np.ndarray, indptr: np.ndarray, shape: tuple) -> tuple:
     return cols.astype(kind), indptr.astype(kind)
 
 
-def _unit_rows(term, weights: np.ndarray) -> tuple:
+def _unit_rows(term) -> tuple:
     """``K ⊗ I₃`` as rows: the three unit directions of every row, weights (r, 3)."""
-    weights = np.asarray(weights, dtype=np.float64)
+    weights = np.asarray(term.weights, dtype=np.float64)
     return (term.K, None, np.broadcast_to(weights[:, None], (len(weights), 3)))
 
 
@@ -113,7 +113,7 @@ def _stretch_rows(term: StretchTerm, state: LocalState) -> tuple:
 
 def _smooth_rows(term: SmoothJoinTerm, state: LocalState) -> tuple:
     if term.mode == "paper":
-        return _unit_rows(term, term.weights)
+        return _unit_rows(term)
     k = term.K.shape[0]
     r = term.applied(state) - term.target(state)
     size = np.linalg.norm(r, axis=1)
@@ -147,7 +147,7 @@ def factor_rows(term, state: LocalState, cache: dict | None = None) -> tuple:
 
     Returns
     -------
-    rows : list of (scipy.sparse matrix, ndarray or None, ndarray)
+    rows : (scipy.sparse matrix, ndarray or None, ndarray)
         ``(K, directions, weights)``: ``K`` of shape (r, n); ``directions``
         of shape (r, D, 3), or ``None`` for the three unit directions
         (``D = 3``); ``weights`` of shape (r, D), ≥ 0, row ``K_r ⊗ d``'s
@@ -158,13 +158,12 @@ def factor_rows(term, state: LocalState, cache: dict | None = None) -> tuple:
         Laplacian: :func:`igljoin.coarse_kernels.rotation_factor`'s layout.
     """
     if isinstance(term, ShapeTerm):
-        rotation = _rotation_values(term, state, {} if cache is None else cache)
-        return [_unit_rows(term, term.weights)], (rotation if term.rotation_aware else None)
+        return _unit_rows(term), _rotation_values(term, state, {} if cache is None else cache)
     if isinstance(term, StretchTerm):
-        return [_stretch_rows(term, state)], None
+        return _stretch_rows(term, state), None
     if isinstance(term, SmoothJoinTerm):
-        return [_smooth_rows(term, state)], None
-    return [_unit_rows(term, term.weights)], None
+        return _smooth_rows(term, state), None
+    return _unit_rows(term), None
 
 
 def rotation_pattern(term: ShapeTerm, cache: dict) -> tuple:
@@ -264,11 +263,10 @@ def gauss_newton_factors(terms: list, state: LocalState, n: int, cache: dict | N
     cache = {} if cache is None else cache
     parts = []
     for term in terms:
-        rows, rotation = factor_rows(term, state, cache)
-        for K, directions, weights in rows:
-            if directions is None:
-                parts.append((_kron3(K, cache=cache), weights.reshape(-1), 1.0))
-                continue
+        (K, directions, weights), rotation = factor_rows(term, state, cache)
+        if directions is None:
+            parts.append((_kron3(K, cache=cache), weights.reshape(-1), 1.0))
+        else:
             parts += [
                 (_kron3(K, directions[:, d], cache), weights[:, d], 1.0)
                 for d in range(directions.shape[1])
@@ -276,13 +274,6 @@ def gauss_newton_factors(terms: list, state: LocalState, n: int, cache: dict | N
         if rotation is not None:
             parts.append((_rotation_matrix(term, rotation, cache), np.ones(3 * term.n), -1.0))
     return parts
-
-
-def _unit_directions(term) -> bool:
-    """Whether :func:`factor_rows` gives ``term``'s rows the unit directions (``K ⊗ I₃``)."""
-    if isinstance(term, StretchTerm):
-        return False
-    return not (isinstance(term, SmoothJoinTerm) and term.mode != "paper")
 
 
 def row_directions(term) -> int:
@@ -316,8 +307,10 @@ def factor_entries(term) -> int:
     int
     """
     nnz = sp.csr_matrix(term.K).nnz
-    # K ⊗ I₃ holds one entry per entry of K in each of its three rows, K_r ⊗ d three
-    nnz *= 3 if _unit_directions(term) else 3 * row_directions(term)
+    D = row_directions(term)
+    # K ⊗ I₃ (D = 3) holds one entry per entry of K in each of its three rows; each of the
+    # D factors of rows K_r ⊗ d three
+    nnz *= 3 if D == 3 else 3 * D
     if isinstance(term, ShapeTerm) and term.rotation_aware:
         return nnz + 9 * sp.csr_matrix(term.L).nnz
     return nnz

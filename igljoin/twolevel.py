@@ -42,14 +42,8 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from . import coarse_kernels as ck
-from .errors import OptionsError, SolveError
-from .linsolve import (
-    AugmentedQuadratic,
-    FixedQuadratic,
-    _Pardiso,
-    _PardisoError,
-    available_backends,
-)
+from .errors import OptionsError
+from .linsolve import AugmentedQuadratic, FixedQuadratic, available_backends
 from .newton import (
     dofs,
     factor_entries,
@@ -154,19 +148,18 @@ class _CoarseAugmented(AugmentedQuadratic):
             shape=(n + len(keep), n + len(keep)),
         )
         del rows, upper, at
-        try:
-            self._pardiso = _Pardiso(A, indefinite=True)
-        except _PardisoError as exc:
-            raise SolveError(
-                f"{exc}; the coarse system could not be factored: use preconditioner='factored'"
-            ) from exc
-        probe = np.ones((n, 1))
-        x = self.solve_free(probe)
-        if not np.isfinite(x).all() or self.residual(x, probe) > self.PROBE_RESIDUAL:
-            raise SolveError(
-                f"the coarse system could not be factored ({self._pardiso.perturbed} pivots "
-                "of its augmented system were perturbed): use preconditioner='factored'"
-            )
+        self._factor_augmented(A)
+
+    def _refused(self, exc: Exception) -> str:
+        """The message when Pardiso reports the error ``exc``: the coarse system's."""
+        return f"{exc}; the coarse system could not be factored: use preconditioner='factored'"
+
+    def _unsound(self, perturbed: int) -> str:
+        """The message when the probe solve fails: the coarse system's."""
+        return (
+            f"the coarse system could not be factored ({perturbed} pivots of its augmented "
+            "system were perturbed): use preconditioner='factored'"
+        )
 
 
 def clusters(X: np.ndarray, graph: sp.spmatrix, size: int) -> np.ndarray:
@@ -464,8 +457,9 @@ class TwoLevelModel:
     built_at : list of int
         Iteration of every build.
     seconds : dict
-        ``clusters``, ``model`` (the Gauss–Newton model's values), ``coarse``
-        (``Aᵀ H A``) and ``factor`` times, summed over the builds.
+        ``clusters``, ``model`` (the Gauss–Newton model's values, and the
+        balancing form's factors), ``coarse`` (``Aᵀ H A``) and ``factor``
+        times, summed over the builds.
     coarse_entries : int or None
         Entries of the coarse system counted at the first refresh (an upper
         bound with band rows kept apart: their rows of zero weight are left
@@ -521,7 +515,6 @@ class TwoLevelModel:
         self._clusters = None
         self.motions = None
         self.factors = None
-        self._model_seconds = 0.0
         self.built_rotations = None
         self.coarse_factor = None
         self.factorizations = 0
@@ -569,7 +562,7 @@ class TwoLevelModel:
             self._where[ls.free] = np.arange(len(ls.free))
             self._clusters = int(self.labels.max()) + 1
             self._wide = self._count(self._clusters, 9 if self.bending else 6)
-            if self.model_entries > self._limit():
+            if self.model_entries > self._limit()[1]:
                 self.seconds["clusters"] += time.perf_counter() - t0
                 message = self._too_large()
                 if not self.fall_back:
@@ -585,10 +578,14 @@ class TwoLevelModel:
             blocks = np.concatenate([blocks, _bending_blocks(X, self.labels)], axis=2)
         self.motions = np.ascontiguousarray(blocks)
         del blocks
+        model = 0.0
         if self.balancing:
             # the balancing form's products with H need the factors themselves
+            t2 = time.perf_counter()
             self.factors = gauss_newton_factors(ls.terms, state, ls.n, self._cache)
-        coarse = self._project(state)
+            model = time.perf_counter() - t2
+        coarse, values = self._project(state)
+        model += values
         t3 = time.perf_counter()
         self.coarse_factor = self._factor(*coarse)
         self.factorizations += 1
@@ -597,9 +594,9 @@ class TwoLevelModel:
             self.built_rotations = state.rotations[ls.free].copy()
         t4 = time.perf_counter()
         self.seconds["clusters"] += t1 - t0
-        # _project splits its time between the model's values and the projection
-        self.seconds["coarse"] += t3 - t1 - self._model_seconds
-        self.seconds["model"] += self._model_seconds
+        # the model's values (and the balancing form's factors) apart from the projection
+        self.seconds["coarse"] += t3 - t1 - model
+        self.seconds["model"] += model
         self.seconds["factor"] += t4 - t3
         return first
 
@@ -654,16 +651,27 @@ class TwoLevelModel:
         self._blocks = ck.block_pattern(local, a)
         self.coarse_entries = int(w * w * len(self._blocks[1]) + wide_entries)
         # besides the coarse system: the operators' cluster patterns, every free vertex's
-        # motions and, for the balancing form, the factors themselves
+        # motions and, for the balancing form, the factors themselves. Of the patterns only
+        # the slots (one per operator entry) are counted, not row_clusters' lists of the
+        # clusters each row reaches nor their row pointers (together 26-32 % of the count
+        # of the bending model on 1k-10k tubes and patches): the bytes per entry of
+        # MAX_MODEL_ENTRIES's comment were measured against the count without them, so
+        # the memory they take is inside those bytes; counting them now would move every
+        # measured count and limit with it
         held = operators + 3 * w * len(self.labels)
         if self.balancing:
             held += sum(factor_entries(t) for t in self.solver.terms)
         self.model_entries = self.coarse_entries + held
         return wide
 
-    def _limit(self) -> int:
-        """The count past which this model is not built (read when it is counted)."""
-        return AUTO_MAX_MODEL_ENTRIES if self.fall_back else MAX_MODEL_ENTRIES
+    def _limit(self) -> tuple:
+        """The count past which this model is not built, ``(name, value)``.
+
+        Read when it is counted (a changed module value applies).
+        """
+        if self.fall_back:
+            return "AUTO_MAX_MODEL_ENTRIES", AUTO_MAX_MODEL_ENTRIES
+        return "MAX_MODEL_ENTRIES", MAX_MODEL_ENTRIES
 
     def _too_large(self) -> str:
         """The refusal's message: the count, the limit and the ways out."""
@@ -673,11 +681,11 @@ class TwoLevelModel:
             else "linear_solver='auto' with Pardiso installed (the smooth join's band rows "
             "are then kept out of the coarse matrix), "
         )
-        name = "AUTO_MAX_MODEL_ENTRIES" if self.fall_back else "MAX_MODEL_ENTRIES"
+        name, limit = self._limit()
         return (
             f"the two-level preconditioner's model would hold {self.model_entries:,} entries "
             f"(its coarse system {self.coarse_entries:,}), more than "
-            f"igljoin.twolevel.{name} = {self._limit():,} (about "
+            f"igljoin.twolevel.{name} = {limit:,} (about "
             f"{_BYTES_PER_ENTRY * self.model_entries / 1e9:.0f} GB at its first build): use "
             "preconditioner='factored' (or 'auto', which then keeps the factored form), "
             f"{pardiso}or raise igljoin.twolevel.{name}"
@@ -724,11 +732,12 @@ class TwoLevelModel:
 
         Returns
         -------
-        S : scipy.sparse.csr_matrix, shape (w a, w a)
-            ``A_c`` (its local part with wide terms), ridge included.
-        U : scipy.sparse.csr_matrix, shape (rows, w a), or None
-            The wide terms' rows ``J A``.
-        weights : ndarray, shape (rows,), or None
+        coarse : (scipy.sparse.csr_matrix, scipy.sparse.csr_matrix or None, ndarray or None)
+            ``(S, U, weights)``: ``S`` of shape (w a, w a), ``A_c`` (its local
+            part with wide terms), ridge included; ``U`` of shape (rows, w a),
+            the wide terms' rows ``J A``, and their ``weights`` (rows,).
+        seconds : float
+            Time spent on the model's values (:func:`igljoin.newton.factor_rows`).
         """
         ls = self.solver
         a = self._clusters
@@ -738,26 +747,23 @@ class TwoLevelModel:
         bptr, bcols, lower, upper = self._blocks
         out = np.zeros((len(bcols), w, w))
         wide_rows, wide_weights = [], []
-        self._model_seconds = 0.0
+        seconds = 0.0
         for term, (K, of_K, of_L), wide in zip(ls.terms, self._patterns, self._wide):
             t0 = time.perf_counter()
-            rows, rotation = factor_rows(term, state, self._cache)
-            self._model_seconds += time.perf_counter() - t0
-            for _, directions, weights in rows:
-                weights = np.ascontiguousarray(weights, dtype=np.float64)
-                directions = (
-                    np.zeros((0, 3, 3))
-                    if directions is None
-                    else np.ascontiguousarray(directions, dtype=np.float64)
-                )
-                args = (K.indptr, K.indices, K.data, directions)
-                if wide:
-                    values = ck.motion_rows_of(*args, of_K[0], of_K[2], where, B)
-                    wide_rows.append(
-                        _motion_matrix(values, of_K[0], of_K[1], weights.shape[1], w, a)
-                    )
-                    wide_weights.append(weights.ravel())
-                    continue
+            (_, directions, weights), rotation = factor_rows(term, state, self._cache)
+            seconds += time.perf_counter() - t0
+            weights = np.ascontiguousarray(weights, dtype=np.float64)
+            directions = (
+                np.zeros((0, 3, 3))
+                if directions is None
+                else np.ascontiguousarray(directions, dtype=np.float64)
+            )
+            args = (K.indptr, K.indices, K.data, directions)
+            if wide:
+                values = ck.motion_rows_of(*args, of_K[0], of_K[2], where, B)
+                wide_rows.append(_motion_matrix(values, of_K[0], of_K[1], weights.shape[1], w, a))
+                wide_weights.append(weights.ravel())
+            else:
                 ck.project_rows(*args, weights, *of_K, bptr, bcols, where, B, out)
             if rotation is not None:
                 (Lptr, Lind, _), *_ = rotation_pattern(term, self._cache)
@@ -777,7 +783,7 @@ class TwoLevelModel:
                 minlength=w * a,
             )
         Ac.setdiag(Ac.diagonal() + _RIDGE * diagonal.mean())
-        return Ac, U, weights
+        return (Ac, U, weights), seconds
 
     @property
     def A(self) -> sp.csr_matrix:

@@ -68,7 +68,7 @@ def test_the_rows_kept_apart_are_the_factor_rows_on_the_motions(patch):
     model.refresh(state, 1)
     A, free, w = model.A, newton.dofs(ls.free), model.motions.shape[2]
     for term, (K, of_K, _) in zip(ls.terms, model._patterns):
-        ((_, directions, weights),), _ = newton.factor_rows(term, state)
+        (_, directions, weights), _ = newton.factor_rows(term, state)
         D = weights.shape[1]
         directions = np.zeros((0, 3, 3)) if directions is None else directions
         values = coarse_kernels.motion_rows_of(
