@@ -93,10 +93,10 @@ def face_normals_areas(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.nda
     two busy cores, going back to ``np.cross`` made paper joins about 4 %
     slower (median of 84 paired joins).
     """
-    return _unit_columns(face_cross_products(V, F))
+    return _normals_areas(face_cross_products(V, F))
 
 
-def _unit_columns(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _normals_areas(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Face normals (m, 3), C-ordered, and areas (m,) of edge cross products ``c`` (3, m)."""
     length = _lengths(c)
     normals = c / np.where(length > 0, length, 1.0)
@@ -325,7 +325,7 @@ def curve_frames(V: np.ndarray, kept: CurveFaces) -> SeamFrames:
     F, incidence, P, T, radius = kept
     corners = V[F]  # (m', 3, 3): read once, for the normals and the centroids
     p0 = corners[:, 0].T  # (3, m') views: coordinate-major, as face_normals_areas reads them
-    normals, areas = _unit_columns(_cross(corners[:, 1].T - p0, corners[:, 2].T - p0))
+    normals, areas = _normals_areas(_cross(corners[:, 1].T - p0, corners[:, 2].T - p0))
     # the face areas at each curve vertex (incidence ⊙ areas), in the incidence's order
     weights = incidence.data.astype(areas.dtype, copy=False) * areas[incidence.indices]
     W = sp.csr_matrix((weights, incidence.indices, incidence.indptr), shape=incidence.shape)
@@ -359,7 +359,7 @@ def seam_frames(
 
     ``curve_frames(V, curve_faces(F, curve, len(V), P, closed, radius=radius))``
     with ``P`` the curve points: only the faces at the curve enter the
-    frames, in their order.
+    frames, kept in their order so that every sum runs as over all faces.
 
     Parameters
     ----------

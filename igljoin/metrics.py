@@ -265,7 +265,8 @@ def crease_angles(
     guest_faces : CurveFaces, optional
         ``curve_faces(seam)`` of a guest with the same faces and curve, if
         already made (a solver keeps its rest guest's): the guest's one-ring
-        frames then measure only what moves.
+        frames (:func:`igljoin.frames.curve_frames`) then measure only what
+        moves.
 
     Returns
     -------
@@ -273,12 +274,8 @@ def crease_angles(
     """
     if host_inward is None:
         host_inward = seam_frames(seam.Vh, seam.Fh, seam.host_curve, seam.closed).inward
-    if guest_faces is None:
-        guest = seam_frames(
-            seam.Vg, seam.Fg, seam.guest_at_host, seam.closed, curve_points=seam.host_points
-        ).inward
-    else:
-        guest = frames.curve_frames(seam.Vg, guest_faces).inward
+    kept = curve_faces(seam) if guest_faces is None else guest_faces
+    guest = frames.curve_frames(seam.Vg, kept).inward
     cos = np.einsum("ij,ij->i", guest, -host_inward)
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
