@@ -239,23 +239,23 @@ def test_folded_pairs_and_dihedral_angles_match_fancy_indexing(joins):
 
 
 def test_curve_incidence_is_the_sparse_row_selection():
+    """The incidence built directly; faces repeating a vertex are left to scipy's own row
+    selection, so their frames are compared with the plain computation instead
+    (test_seam_frames_match_frames_over_all_faces)."""
     rng = np.random.default_rng(3)
     s = phantoms.paper_sample("partial_patch", "equal", resolution=0.4)
-    fast = 0
     for trial in range(60):
         if trial % 2:
             F, n = s.guest.F[rng.random(s.guest.n_faces) < 0.5], s.guest.n_vertices
-        else:  # small random complexes, some faces repeating a vertex
+        else:  # small random complexes, faces sharing vertices in every way
             n = 12
-            F = rng.integers(0, n, size=(rng.integers(1, 30), 3))
-        fast += bool((F != np.roll(F, 1, axis=1)).all())  # built directly, not by scipy
+            F = np.array([rng.choice(n, 3, replace=False) for _ in range(rng.integers(1, 30))])
         curve = rng.integers(0, n, size=rng.integers(1, 40))  # repeated curve vertices too
         got = frames._curve_incidence(F, curve, n)
         ref = frames.vertex_face_matrix(F, n)[curve].tocsr()
         assert isinstance(got, sp.csr_matrix) and got.shape == ref.shape
         for name in ("indptr", "indices", "data"):
             _assert_same(getattr(got, name), getattr(ref, name))
-    assert fast >= 30  # every subset of the guest's faces, and some random complexes
 
 
 def _with_faces_repeating_a_vertex(V, F, curve):
