@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -26,6 +27,9 @@ __all__ = [
     "correspond",
     "curve_points_at",
     "rigid_fit",
+    "rigid_fit_to",
+    "rigid_reference",
+    "RigidReference",
     "split_boundary_faces",
 ]
 
@@ -394,10 +398,55 @@ def pair_curves(
 def rigid_fit(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Proper rotation ``R`` (3, 3) and translation ``t`` (3,) minimising ‖A Rᵀ + t − B‖.
 
-    ``A`` and ``B`` have shape (q, 3) (Kabsch, without reflection).
+    ``A`` and ``B`` have shape (q, 3) (Kabsch, without reflection):
+    ``rigid_fit_to(rigid_reference(A), B)``.
     """
-    ca, cb = A.mean(axis=0), B.mean(axis=0)
-    H = (A - ca).T @ (B - cb)
+    return rigid_fit_to(rigid_reference(A), B)
+
+
+class RigidReference(NamedTuple):
+    """The side of a rigid fit that does not depend on the target (:func:`rigid_reference`).
+
+    Attributes
+    ----------
+    centroid : ndarray, shape (3,)
+        Mean of the positions.
+    centred : ndarray, shape (q, 3)
+        The positions less their mean.
+    """
+
+    centroid: np.ndarray
+    centred: np.ndarray
+
+
+def rigid_reference(A: np.ndarray) -> RigidReference:
+    """The mean of the positions ``A`` (q, 3) and the positions less it.
+
+    Made once, it fits ``A`` to any number of targets (:func:`rigid_fit_to`).
+    """
+    ca = A.mean(axis=0)
+    return RigidReference(ca, A - ca)
+
+
+def rigid_fit_to(reference: RigidReference, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`rigid_fit` of the positions of ``reference`` onto ``B`` (q, 3).
+
+    Parameters
+    ----------
+    reference : RigidReference
+        ``rigid_reference(A)``.
+    B : ndarray, shape (q, 3)
+
+    Returns
+    -------
+    R : ndarray, shape (3, 3)
+        Proper rotation.
+    t : ndarray, shape (3,)
+        Translation: ``A Rᵀ + t`` is the fit of ``A`` onto ``B``.
+    """
+    ca, centred = reference
+    cb = B.mean(axis=0)
+    H = centred.T @ (B - cb)
     U, _, Vt = np.linalg.svd(H)
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
     R = Vt.T @ D @ U.T

@@ -16,6 +16,7 @@ robust on noisy scans.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -23,7 +24,10 @@ import scipy.sparse as sp
 from .polyline import mean_segment
 
 __all__ = [
+    "CurveFaces",
     "SeamFrames",
+    "curve_faces",
+    "curve_frames",
     "face_normals_areas",
     "face_areas",
     "face_cross_products",
@@ -89,7 +93,11 @@ def face_normals_areas(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.nda
     two busy cores, going back to ``np.cross`` made paper joins about 4 %
     slower (median of 84 paired joins).
     """
-    c = face_cross_products(V, F)
+    return _normals_areas(face_cross_products(V, F))
+
+
+def _normals_areas(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Face normals (m, 3), C-ordered, and areas (m,) of edge cross products ``c`` (3, m)."""
     length = _lengths(c)
     normals = c / np.where(length > 0, length, 1.0)
     return np.ascontiguousarray(normals.T), 0.5 * length
@@ -119,9 +127,17 @@ def face_cross_products(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     VT = np.ascontiguousarray(np.asarray(V).T)  # (3, n)
     FT = np.ascontiguousarray(np.asarray(F).T)  # (3, m)
     p0 = np.take(VT, FT[0], axis=1)  # (3, m) corner positions
-    a = np.take(VT, FT[1], axis=1) - p0
-    b = np.take(VT, FT[2], axis=1) - p0
-    c = np.empty_like(a)
+    return _cross(np.take(VT, FT[1], axis=1) - p0, np.take(VT, FT[2], axis=1) - p0)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross products of the columns of ``a`` and ``b`` (3, m), in the layout of ``a``.
+
+    Each coordinate is one rounded product less another, in the order and
+    dtype of ``np.cross`` on the rows of ``a.T`` and ``b.T``, so the values
+    are its values to the last bit, without its overhead on short arrays.
+    """
+    c = np.empty_like(a, dtype=np.result_type(a, b))
     for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
         np.multiply(a[j], b[k], out=c[i])
         c[i] -= a[k] * b[j]
@@ -136,15 +152,12 @@ def vertex_face_matrix(F: np.ndarray, n: int) -> sp.csr_matrix:
     )
 
 
-def _curve_face_weights(
-    F: np.ndarray, curve: np.ndarray, n: int, areas: np.ndarray
-) -> sp.csr_matrix:
-    """The face areas at each curve vertex, as ``vertex_face_matrix(F, n)[curve] ⊙ areas``.
+def _curve_incidence(F: np.ndarray, curve: np.ndarray, n: int) -> sp.csr_matrix:
+    """The rows ``curve`` of ``vertex_face_matrix(F, n)``: how many corners of each face are there.
 
-    Built directly in CSR form: the same matrix (rows in curve order, each
-    row's faces ascending, explicit zeros kept), so that products with it
-    add the same terms in the same order, without the sparse row selection
-    and element-wise product.
+    Built directly in CSR form when no face repeats a vertex: the same
+    matrix (rows in curve order, each row's faces ascending, every entry
+    1.0), without the sparse row selection.
 
     Parameters
     ----------
@@ -152,12 +165,12 @@ def _curve_face_weights(
     curve : ndarray of int, shape (k,)
     n : int
         Number of vertices.
-    areas : ndarray, shape (m,)
 
     Returns
     -------
     scipy.sparse.csr_matrix, shape (k, m)
-        Entry ``(i, f)`` is ``areas[f]`` where face ``f`` uses ``curve[i]``.
+        Entry ``(i, f)`` is the number of corners of face ``f`` at
+        ``curve[i]`` (1, but 2 or 3 for a face that repeats that vertex).
     """
     m = len(F)
     corner_vertex = np.asarray(F, dtype=np.int64).reshape(-1)
@@ -168,8 +181,8 @@ def _curve_face_weights(
             | (corner_vertex[1::3] == corner_vertex[2::3])
             | (corner_vertex[2::3] == corner_vertex[0::3])
         ).any()
-    ):  # a face repeating a vertex sums two entries: leave it to scipy
-        return vertex_face_matrix(F, n)[curve].multiply(areas[None, :]).tocsr()
+    ):  # a face repeating a vertex: entries above 1, left to scipy
+        return vertex_face_matrix(F, n)[curve].tocsr()
     order = np.argsort(corner_vertex, kind="stable")  # by vertex, faces ascending within
     faces = order // 3
     per_vertex = np.bincount(corner_vertex, minlength=n)
@@ -184,7 +197,7 @@ def _curve_face_weights(
         np.int32 if max(m, len(curve), int(indptr[-1])) <= np.iinfo(np.int32).max else np.int64
     )
     return sp.csr_matrix(
-        (1.0 * areas[indices], indices.astype(index_dtype), indptr.astype(index_dtype)),
+        (np.ones(len(indices)), indices.astype(index_dtype), indptr.astype(index_dtype)),
         shape=(len(curve), m),
     )
 
@@ -221,6 +234,118 @@ def _curve_tangents(P: np.ndarray, closed: bool, span: int) -> np.ndarray:
     return unit(P[fwd] - P[bwd])
 
 
+class CurveFaces(NamedTuple):
+    """Everything :func:`seam_frames` takes from a surface along a curve but its positions.
+
+    Made once (:func:`curve_faces`), it gives the frames of the same faces
+    at any positions (:func:`curve_frames`).
+
+    Attributes
+    ----------
+    faces : ndarray of int, shape (m', 3)
+        The faces at the curve, in their order (:func:`faces_at`).
+    incidence : scipy.sparse.csr_matrix, shape (k, m')
+        Entry ``(i, f)`` the number of corners of ``faces[f]`` at the
+        ``i``-th curve vertex: rows in curve order, each row's faces
+        ascending. Times the face areas, the weights of the face normals
+        and centroids.
+    points : ndarray, shape (k, 3)
+        The curve's positions.
+    tangent : ndarray, shape (k, 3)
+        Unit curve tangents there (:attr:`SeamFrames.tangent`).
+    radius : float or None
+        Smoothing radius, as given to :func:`seam_frames`.
+    """
+
+    faces: np.ndarray
+    incidence: sp.csr_matrix
+    points: np.ndarray
+    tangent: np.ndarray
+    radius: float | None
+
+
+def curve_faces(
+    F: np.ndarray,
+    curve: np.ndarray,
+    n: int,
+    points: np.ndarray,
+    closed: bool,
+    *,
+    radius: float | None = None,
+) -> CurveFaces:
+    """The parts of the frames along ``curve`` that do not depend on the positions.
+
+    Parameters
+    ----------
+    F : ndarray of int, shape (m, 3)
+    curve : ndarray of int, shape (k,)
+        Ordered boundary vertices.
+    n : int
+        Number of vertices (greater than every index in ``F`` and ``curve``).
+    points : ndarray, shape (k, 3)
+        Positions for the curve tangents and the inward directions' signs
+        (``V[curve]`` in :func:`seam_frames`, by default).
+    closed : bool
+    radius : float, optional
+        Smoothing radius, as in :func:`seam_frames`.
+
+    Returns
+    -------
+    CurveFaces
+    """
+    curve = np.asarray(curve)
+    faces = faces_at(F, curve, n)
+    span = 1
+    if radius is not None and radius > 0:
+        mean_edge = mean_segment(points, closed=False) if len(points) > 1 else radius
+        span = int(np.clip(round(radius / max(mean_edge, 1e-300)), 1, max(1, len(points) // 4)))
+    tangent = _curve_tangents(points, closed, span)
+    return CurveFaces(faces, _curve_incidence(faces, curve, n), points, tangent, radius)
+
+
+def curve_frames(V: np.ndarray, kept: CurveFaces) -> SeamFrames:
+    """The frames of :func:`seam_frames` at positions ``V`` (n, 3), from ``curve_faces(...)``.
+
+    Only the corners of the faces at the curve are read. The normal at a
+    curve vertex is the area-weighted mean of its faces' normals (or, with a
+    radius, the quadric fit's); the inward direction ``unit(normal ×
+    tangent)`` points towards the area-weighted mean of its faces'
+    centroids.
+
+    Parameters
+    ----------
+    V : ndarray, shape (n, 3)
+    kept : CurveFaces
+        Of the faces of ``V`` (:func:`curve_faces`).
+
+    Returns
+    -------
+    SeamFrames
+    """
+    F, incidence, P, T, radius = kept
+    corners = V[F]  # (m', 3, 3): read once, for the normals and the centroids
+    p0 = corners[:, 0].T  # (3, m') views: coordinate-major, as face_normals_areas reads them
+    normals, areas = _normals_areas(_cross(corners[:, 1].T - p0, corners[:, 2].T - p0))
+    # the face areas at each curve vertex (incidence ⊙ areas), in the incidence's order
+    weights = incidence.data.astype(areas.dtype, copy=False) * areas[incidence.indices]
+    W = sp.csr_matrix((weights, incidence.indices, incidence.indptr), shape=incidence.shape)
+    n = unit(W @ normals)
+    if radius is not None and radius > 0:
+        n = _quadric_normals(V, P, n, T, radius)
+    h = unit(_cross(n.T, T.T).T)  # C-ordered, as np.cross returns it (einsum sums by layout)
+    # sign: the inward direction points towards the faces at the vertex. The faces'
+    # centroids have their corners summed in order (as corners.mean(axis=1)), the rows of
+    # W are summed as W.sum(axis=1) adds them (np.add.reduceat over each row's entries)
+    centroids = (corners[:, 0] + corners[:, 1] + corners[:, 2]) / 3.0
+    rows = np.flatnonzero(np.diff(incidence.indptr))
+    total = np.zeros((len(P), 1), dtype=weights.dtype)
+    total[rows, 0] = np.add.reduceat(weights, incidence.indptr[rows])
+    centroid_offset = (W @ centroids) / np.maximum(total, 1e-300) - P
+    flip = np.einsum("ij,ij->i", h, centroid_offset) < 0
+    h[flip] *= -1.0
+    return SeamFrames(normal=n, tangent=T, inward=h)
+
+
 def seam_frames(
     V: np.ndarray,
     F: np.ndarray,
@@ -231,6 +356,10 @@ def seam_frames(
     curve_points: np.ndarray | None = None,
 ) -> SeamFrames:
     """Normals, curve tangents and inward directions along a boundary curve.
+
+    ``curve_frames(V, curve_faces(F, curve, len(V), P, closed, radius=radius))``
+    with ``P`` the curve points: only the faces at the curve enter the
+    frames, kept in their order so that every sum runs as over all faces.
 
     Parameters
     ----------
@@ -249,25 +378,7 @@ def seam_frames(
     SeamFrames
     """
     P = V[curve] if curve_points is None else curve_points
-    # only the faces at the curve enter the frames; keeping them in their
-    # order keeps every sum below in the same order as over all faces
-    F = faces_at(F, curve, len(V))
-    normals, areas = face_normals_areas(V, F)
-    W = _curve_face_weights(F, np.asarray(curve), len(V), areas)
-    n = unit(W @ normals)
-    span = 1
-    if radius is not None and radius > 0:
-        mean_edge = mean_segment(P, closed=False) if len(P) > 1 else radius
-        span = int(np.clip(round(radius / max(mean_edge, 1e-300)), 1, max(1, len(P) // 4)))
-    T = _curve_tangents(P, closed, span)
-    if radius is not None and radius > 0:
-        n = _quadric_normals(V, P, n, T, radius)
-    h = unit(np.cross(n, T))
-    # sign: the inward direction points towards the faces at the vertex
-    centroid_offset = (W @ V[F].mean(axis=1)) / np.maximum(np.asarray(W.sum(axis=1)), 1e-300) - P
-    flip = np.einsum("ij,ij->i", h, centroid_offset) < 0
-    h[flip] *= -1.0
-    return SeamFrames(normal=n, tangent=T, inward=h)
+    return curve_frames(V, curve_faces(F, curve, len(V), P, closed, radius=radius))
 
 
 def _quadric_normals(

@@ -40,12 +40,12 @@ from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
-import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .correspond import rigid_fit
+from . import correspond, frames
+from .correspond import RigidReference
 from .errors import OptionsError
-from .frames import face_areas, face_normals_areas, faces_at, seam_frames, unit, vertex_face_matrix
+from .frames import CurveFaces, face_areas, face_normals_areas, seam_frames
 from .polyline import mean_segment
 from .seam_geometry import SeamGeometry
 
@@ -232,45 +232,17 @@ def nonrigid_displacement(
     """
     V0 = np.asarray(V0, dtype=np.float64)
     V1 = np.asarray(V1, dtype=np.float64)
-    R, t = rigid_fit(V0, V1) if rest is None else _rigid_fit_to(rest, V1)
+    R, t = correspond.rigid_fit_to(rigid_reference(V0) if rest is None else rest, V1)
     return _row_norms(np.ascontiguousarray((V1 - (V0 @ R.T + t)).T))
 
 
-class RigidReference(NamedTuple):
+def rigid_reference(V0: np.ndarray) -> RigidReference:
     """The rest side of the rigid fit of :func:`nonrigid_displacement`.
 
-    Attributes
-    ----------
-    centroid : ndarray, shape (3,)
-        Mean rest position.
-    centred : ndarray, shape (n, 3)
-        Rest positions less their mean.
+    :func:`igljoin.correspond.rigid_reference` of the rest positions ``V0``
+    (n, 3) as float64, as :func:`nonrigid_displacement` fits them.
     """
-
-    centroid: np.ndarray
-    centred: np.ndarray
-
-
-def rigid_reference(V0: np.ndarray) -> RigidReference:
-    """The mean of the rest positions ``V0`` (n, 3) and the positions less it."""
-    V0 = np.asarray(V0, dtype=np.float64)
-    ca = V0.mean(axis=0)
-    return RigidReference(ca, V0 - ca)
-
-
-def _rigid_fit_to(rest: RigidReference, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``igljoin.correspond.rigid_fit(V0, B)`` with the rest side ``rest`` made already.
-
-    The same operations in the same order, so ``R`` (3, 3) and ``t`` (3,)
-    are the same to the last bit (``tests/test_metrics_speed_equivalence.py``).
-    """
-    ca, centred = rest
-    cb = B.mean(axis=0)
-    H = centred.T @ (B - cb)
-    U, _, Vt = np.linalg.svd(H)
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
-    R = Vt.T @ D @ U.T
-    return R, cb - ca @ R.T
+    return correspond.rigid_reference(np.asarray(V0, dtype=np.float64))
 
 
 def crease_angles(
@@ -293,7 +265,8 @@ def crease_angles(
     guest_faces : CurveFaces, optional
         ``curve_faces(seam)`` of a guest with the same faces and curve, if
         already made (a solver keeps its rest guest's): the guest's one-ring
-        frames then measure only what moves.
+        frames (:func:`igljoin.frames.curve_frames`) then measure only what
+        moves.
 
     Returns
     -------
@@ -301,107 +274,22 @@ def crease_angles(
     """
     if host_inward is None:
         host_inward = seam_frames(seam.Vh, seam.Fh, seam.host_curve, seam.closed).inward
-    if guest_faces is None:
-        guest = seam_frames(
-            seam.Vg, seam.Fg, seam.guest_at_host, seam.closed, curve_points=seam.host_points
-        ).inward
-    else:
-        guest = _guest_inward(seam.Vg, guest_faces)
+    kept = curve_faces(seam) if guest_faces is None else guest_faces
+    guest = frames.curve_frames(seam.Vg, kept).inward
     cos = np.einsum("ij,ij->i", guest, -host_inward)
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 
-class CurveFaces(NamedTuple):
-    """What the guest's one-ring frames along a seam take from its faces and the host curve.
+def curve_faces(seam: SeamGeometry) -> CurveFaces:
+    """:func:`igljoin.frames.curve_faces` of the guest of ``seam`` along its curve.
 
-    Attributes
-    ----------
-    faces : ndarray of int64, shape (m', 3)
-        The guest faces at the curve, in their order
-        (:func:`igljoin.frames.faces_at`).
-    weights : scipy.sparse.csr_matrix, shape (k, m')
-        Curve vertex to face incidence of ``faces``: the face area weights'
-        rows and columns, its values to be replaced by the areas.
-    points : ndarray, shape (k, 3)
-        The host curve's positions.
-    tangent : ndarray, shape (k, 3)
-        The curve tangents there (:attr:`igljoin.frames.SeamFrames.tangent`).
+    The guest's faces at the curve, their incidence and the host curve's
+    points and tangents: what its one-ring frames take from all but its
+    positions.
     """
-
-    faces: np.ndarray
-    weights: sp.csr_matrix
-    points: np.ndarray
-    tangent: np.ndarray
-
-
-def curve_faces(seam: SeamGeometry) -> CurveFaces | None:
-    """:class:`CurveFaces` of the guest of ``seam`` along its curve.
-
-    Returns ``None`` for a guest with a face that repeats a vertex at the
-    curve (its weights are not a plain incidence): the frames are then
-    measured in full every time.
-    """
-    n = len(seam.Vg)
-    faces = faces_at(seam.Fg, seam.guest_at_host, n)
-    if ((faces == np.roll(faces, 1, axis=1)).any(axis=1)).any():
-        return None
-    weights = vertex_face_matrix(faces, n)[seam.guest_at_host].tocsr()
-    weights.sort_indices()
-    points = seam.host_points
-    tangent = seam_frames(seam.Vg, faces, seam.guest_at_host, seam.closed, curve_points=points)
-    return CurveFaces(faces, weights, points, tangent.tangent)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross(a, b)`` of rows ``a``, ``b`` (k, 3): each coordinate one rounded product
-    less another, as it rounds them, without its overhead on short arrays."""
-    c = np.empty((len(a), 3))  # C-ordered, as np.cross returns it (einsum sums by layout)
-    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
-        np.multiply(a[:, j], b[:, k], out=c[:, i])
-        c[:, i] -= a[:, k] * b[:, j]
-    return c
-
-
-def _guest_inward(V: np.ndarray, kept: CurveFaces) -> np.ndarray:
-    """The one-ring inward directions of :func:`igljoin.frames.seam_frames` at positions ``V``.
-
-    ``seam_frames(V, F, curve, closed, curve_points=kept.points).inward``
-    with the faces at the curve, the rows and columns of their area weights
-    and the curve's tangents taken from ``kept`` (they do not move): the
-    same operations on the same values in the same order, so the same
-    directions to the last bit (``tests/test_metrics_speed_equivalence.py``).
-
-    Parameters
-    ----------
-    V : ndarray, shape (n, 3)
-    kept : CurveFaces
-
-    Returns
-    -------
-    ndarray, shape (k, 3)
-    """
-    F, W0, P, T = kept
-    corners = V[F]  # (m', 3, 3): read once, for the normals and the centroids
-    # face_normals_areas(V, F): the cross products as np.cross rounds them, their
-    # lengths with the squares summed left to right
-    c = _cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    sq = c * c
-    length = np.sqrt((sq[:, 0] + sq[:, 1]) + sq[:, 2])
-    normals = c / np.where(length > 0, length, 1.0)[:, None]
-    areas = 0.5 * length
-    W = sp.csr_matrix((1.0 * areas[W0.indices], W0.indices, W0.indptr), shape=W0.shape)
-    n = unit(W @ normals)
-    h = unit(_cross(n, T))
-    # the faces' centroids, their corners summed in order (corners.mean(axis=1)), and the
-    # rows' sums of W as W.sum(axis=1) adds them (np.add.reduceat over each row's entries)
-    centroids = (corners[:, 0] + corners[:, 1] + corners[:, 2]) / 3.0
-    rows = np.flatnonzero(np.diff(W0.indptr))
-    total = np.zeros((W0.shape[0], 1))
-    total[rows, 0] = np.add.reduceat(W.data, W0.indptr[rows])
-    centroid_offset = (W @ centroids) / np.maximum(total, 1e-300) - P
-    flip = np.einsum("ij,ij->i", h, centroid_offset) < 0
-    h[flip] *= -1.0
-    return h
+    return frames.curve_faces(
+        seam.Fg, seam.guest_at_host, len(seam.Vg), seam.host_points, seam.closed
+    )
 
 
 def _adjacent_face_pairs(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

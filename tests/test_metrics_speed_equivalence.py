@@ -25,8 +25,7 @@ import pytest
 import scipy.sparse as sp
 
 import igljoin
-from igljoin import bandfit, frames, metrics, phantoms, topology
-from igljoin.correspond import rigid_fit
+from igljoin import bandfit, correspond, frames, metrics, phantoms, topology
 from igljoin.mesh import Mesh
 from igljoin.seam_geometry import SeamGeometry
 
@@ -108,6 +107,16 @@ def _ref_seam_frames(V, F, curve, closed, radius=None, curve_points=None):
     return frames.SeamFrames(normal=n, tangent=T, inward=h)
 
 
+def _ref_rigid_fit(A, B):
+    """Kabsch in one piece: the proper rotation and translation fitting A onto B."""
+    ca, cb = A.mean(axis=0), B.mean(axis=0)
+    H = (A - ca).T @ (B - cb)
+    U, _, Vt = np.linalg.svd(H)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
+    R = Vt.T @ D @ U.T
+    return R, cb - ca @ R.T
+
+
 def _ref_point_polyline_distance(P, C, closed):
     B = np.roll(C, -1, axis=0) if closed else C[1:]
     A = C[: len(B)]
@@ -165,7 +174,7 @@ def test_edge_strain_and_displacement_match_row_norms(joins):
         l0 = np.linalg.norm(V0[E[:, 0]] - V0[E[:, 1]], axis=1)
         l1 = np.linalg.norm(V1[E[:, 0]] - V1[E[:, 1]], axis=1)
         _assert_same(metrics.edge_strain(V0, V1, E), (l1 - l0) / np.where(l0 > 0, l0, np.nan))
-        R, t = rigid_fit(V0, V1)
+        R, t = _ref_rigid_fit(V0, V1)
         _assert_same(
             metrics.nonrigid_displacement(V0, V1), np.linalg.norm(V1 - (V0 @ R.T + t), axis=1)
         )
@@ -229,27 +238,33 @@ def test_folded_pairs_and_dihedral_angles_match_fancy_indexing(joins):
 # -- seam frames on the faces at the curve ----------------------------------------------------
 
 
-def test_curve_face_weights_are_the_sparse_product():
+def test_curve_incidence_is_the_sparse_row_selection():
+    """The incidence built directly; faces repeating a vertex are left to scipy's own row
+    selection, so their frames are compared with the plain computation instead
+    (test_seam_frames_match_frames_over_all_faces)."""
     rng = np.random.default_rng(3)
     s = phantoms.paper_sample("partial_patch", "equal", resolution=0.4)
     for trial in range(60):
         if trial % 2:
             F, n = s.guest.F[rng.random(s.guest.n_faces) < 0.5], s.guest.n_vertices
-        else:  # small random complexes, some faces repeating a vertex
+        else:  # small random complexes, faces sharing vertices in every way
             n = 12
-            F = rng.integers(0, n, size=(rng.integers(1, 30), 3))
-        areas = rng.random(len(F))
-        areas[rng.random(len(F)) < 0.2] = 0.0  # explicit zeros stay
+            F = np.array([rng.choice(n, 3, replace=False) for _ in range(rng.integers(1, 30))])
         curve = rng.integers(0, n, size=rng.integers(1, 40))  # repeated curve vertices too
-        got = frames._curve_face_weights(F, curve, n, areas)
-        ref = frames.vertex_face_matrix(F, n)[curve].multiply(areas[None, :]).tocsr()
-        assert got.shape == ref.shape
+        got = frames._curve_incidence(F, curve, n)
+        ref = frames.vertex_face_matrix(F, n)[curve].tocsr()
+        assert isinstance(got, sp.csr_matrix) and got.shape == ref.shape
         for name in ("indptr", "indices", "data"):
             _assert_same(getattr(got, name), getattr(ref, name))
-        X = rng.normal(size=(len(F), 3))
-        _assert_same(got @ X, ref @ X)
-        _assert_same(np.asarray(got.sum(axis=1)), np.asarray(ref.sum(axis=1)))
-    assert isinstance(got, sp.csr_matrix)
+
+
+def _with_faces_repeating_a_vertex(V, F, curve):
+    """``F`` with a face at each of three curve vertices that repeats that vertex, and one
+    that is a single point: their areas are zero and their incidence above 1."""
+    a, b, c = (int(v) for v in curve[[0, len(curve) // 3, len(curve) // 2]])
+    far = int(np.argmax(np.linalg.norm(V - V[a], axis=1)))
+    extra = np.array([[a, a, far], [far, b, b], [c, far, c], [a, a, a]])
+    return np.vstack([F[: len(F) // 2], extra, F[len(F) // 2 :]])
 
 
 def test_seam_frames_match_frames_over_all_faces(joins):
@@ -265,6 +280,10 @@ def test_seam_frames_match_frames_over_all_faces(joins):
                 sm.closed,
                 {"curve_points": res.host.V[sm.host_curve]},
             ),
+        ]
+        cases += [
+            (V, _with_faces_repeating_a_vertex(V, F, curve), curve, closed, kw)
+            for V, F, curve, closed, kw in cases
         ]
         for V, F, curve, closed, kw in cases:
             got = frames.seam_frames(V, F, curve, closed, **kw)
@@ -662,33 +681,55 @@ def _seam_geometry(res, i=0):
     )
 
 
-def test_kept_curve_faces_give_the_guest_frames_of_seam_frames(joins):
+def test_kept_curve_faces_give_the_frames_at_other_positions(joins):
     rng = np.random.default_rng(11)
     for _, res in joins.values():
         seam = _seam_geometry(res)
+        sm = res.seams[0]
         kept = metrics.curve_faces(seam)
-        assert kept is not None
-        # the rest guest's faces, weights and tangents, used at other positions
+        host = frames.curve_faces(
+            res.host.F, sm.host_curve, len(res.host.V), seam.host_points, sm.closed, radius=2.0
+        )
+        # made once, used at other positions: the plain computation at those positions
         for V in (res.guest.V, res.rest_guest.V, res.guest.V + rng.normal(size=res.guest.V.shape)):
             moved = seam.with_guest(V)
-            full = frames.seam_frames(
+            ref = _ref_seam_frames(
                 V, seam.Fg, seam.guest_at_host, seam.closed, curve_points=seam.host_points
             )
-            _assert_same(metrics._guest_inward(V, kept), full.inward)
+            got = frames.curve_frames(V, kept)
+            for name in ("normal", "tangent", "inward"):
+                _assert_same(getattr(got, name), getattr(ref, name))
+            host_inward = _ref_seam_frames(res.host.V, res.host.F, sm.host_curve, sm.closed).inward
+            cos = np.einsum("ij,ij->i", ref.inward, -host_inward)
             _assert_same(
-                metrics.crease_angles(moved, guest_faces=kept), metrics.crease_angles(moved)
+                metrics.crease_angles(moved, guest_faces=kept),
+                np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))),
             )
+        for V in (res.host.V, res.host.V + rng.normal(scale=0.1, size=res.host.V.shape)):
+            got = frames.curve_frames(V, host)
+            ref = _ref_seam_frames(
+                V, res.host.F, sm.host_curve, sm.closed, radius=2.0, curve_points=seam.host_points
+            )
+            for name in ("normal", "tangent", "inward"):
+                _assert_same(getattr(got, name), getattr(ref, name))
 
 
-def test_curve_faces_decline_a_face_repeating_a_vertex():
+def test_kept_curve_faces_of_faces_repeating_a_vertex():
     V = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
     F = np.array([[0, 1, 2], [0, 2, 3], [0, 0, 3]])  # the last face repeats vertex 0
     seam = SeamGeometry(V, F[:2], [0, 1], V, F, [0, 1], False)
-    assert metrics.curve_faces(seam) is None
-    clean = SeamGeometry(V, F[:2], [0, 1], V, F[:2], [0, 1], False)
-    kept = metrics.curve_faces(clean)
-    assert kept is not None
-    _assert_same(metrics.crease_angles(clean, guest_faces=kept), metrics.crease_angles(clean))
+    kept = metrics.curve_faces(seam)
+    assert kept.incidence[0, 2] == 2.0  # vertex 0 twice in the last face
+    host_inward = _ref_seam_frames(V, F[:2], [0, 1], False).inward
+    lifted = V + np.array([0.0, 0.0, 0.3]) * V[:, [1]]  # the faces no longer flat
+    for X in (V, lifted):
+        ref = _ref_seam_frames(X, F, [0, 1], False, curve_points=V[[0, 1]])
+        _assert_same(frames.curve_frames(X, kept).inward, ref.inward)
+        cos = np.einsum("ij,ij->i", ref.inward, -host_inward)
+        _assert_same(
+            metrics.crease_angles(seam.with_guest(X), guest_faces=kept),
+            np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))),
+        )
 
 
 @pytest.mark.parametrize("closed", [True, False])
@@ -724,9 +765,12 @@ def test_kept_incidence_and_rigid_reference_give_the_plain_maps(joins):
         _assert_same(got, metrics.vertex_strain(E, broken, n))
         assert not np.array_equal(got, metrics.vertex_strain(E, strain, n), equal_nan=True)
         rest = metrics.rigid_reference(V0)
-        for W in (V1, V1[::-1].copy(), V0):
-            _assert_same(metrics._rigid_fit_to(rest, W)[0], rigid_fit(V0, W)[0])
-            _assert_same(metrics._rigid_fit_to(rest, W)[1], rigid_fit(V0, W)[1])
+        # a mirror image: the best fit is a proper rotation, not the reflection
+        for W in (V1, V1[::-1].copy(), V0, V1 * np.array([1.0, 1.0, -1.0])):
+            R, t = _ref_rigid_fit(V0, W)
+            for got in (correspond.rigid_fit_to(rest, W), correspond.rigid_fit(V0, W)):
+                _assert_same(got[0], R)
+                _assert_same(got[1], t)
             _assert_same(
                 metrics.nonrigid_displacement(V0, W, rest=rest),
                 metrics.nonrigid_displacement(V0, W),
