@@ -155,7 +155,7 @@ class RestMeasures:
         """
         return {name: dict(value) for name, value in self._kept(key, make).items()}
 
-    def curve_faces(self, seam: SeamGeometry) -> metrics.CurveFaces | None:
+    def curve_faces(self, seam: SeamGeometry) -> metrics.CurveFaces:
         """:func:`igljoin.metrics.curve_faces` of ``seam`` (its guest's faces at the curve)."""
         key = ("curve faces", seam.guest_at_host.tobytes(), seam.host_curve.tobytes(), seam.closed)
         return self._kept(key, lambda: metrics.curve_faces(seam))
