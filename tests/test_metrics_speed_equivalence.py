@@ -691,6 +691,7 @@ def test_kept_curve_faces_give_the_frames_at_other_positions(joins):
             res.host.F, sm.host_curve, len(res.host.V), seam.host_points, sm.closed, radius=2.0
         )
         # made once, used at other positions: the plain computation at those positions
+        host_inward = _ref_seam_frames(res.host.V, res.host.F, sm.host_curve, sm.closed).inward
         for V in (res.guest.V, res.rest_guest.V, res.guest.V + rng.normal(size=res.guest.V.shape)):
             moved = seam.with_guest(V)
             ref = _ref_seam_frames(
@@ -699,7 +700,6 @@ def test_kept_curve_faces_give_the_frames_at_other_positions(joins):
             got = frames.curve_frames(V, kept)
             for name in ("normal", "tangent", "inward"):
                 _assert_same(getattr(got, name), getattr(ref, name))
-            host_inward = _ref_seam_frames(res.host.V, res.host.F, sm.host_curve, sm.closed).inward
             cos = np.einsum("ij,ij->i", ref.inward, -host_inward)
             _assert_same(
                 metrics.crease_angles(moved, guest_faces=kept),
@@ -768,13 +768,18 @@ def test_kept_incidence_and_rigid_reference_give_the_plain_maps(joins):
         # a mirror image: the best fit is a proper rotation, not the reflection
         for W in (V1, V1[::-1].copy(), V0, V1 * np.array([1.0, 1.0, -1.0])):
             R, t = _ref_rigid_fit(V0, W)
+            assert np.linalg.det(R) > 0  # proper, the mirror image included
             for got in (correspond.rigid_fit_to(rest, W), correspond.rigid_fit(V0, W)):
                 _assert_same(got[0], R)
                 _assert_same(got[1], t)
-            _assert_same(
+            # the distances to the reference fit's motion, with the kept rest side and without
+            # (a tolerance of 1e-12 of the guest's size: the row norms sum in another order)
+            plain = np.linalg.norm(W - (V0 @ R.T + t), axis=1)
+            for got in (
                 metrics.nonrigid_displacement(V0, W, rest=rest),
                 metrics.nonrigid_displacement(V0, W),
-            )
+            ):
+                assert np.allclose(got, plain, rtol=0, atol=1e-12 * np.ptp(V0))
 
 
 def test_folded_pairs_from_given_normals(joins):
