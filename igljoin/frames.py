@@ -238,7 +238,10 @@ class CurveFaces(NamedTuple):
     """Everything :func:`seam_frames` takes from a surface along a curve but its positions.
 
     Made once (:func:`curve_faces`), it gives the frames of the same faces
-    at any positions (:func:`curve_frames`).
+    at any positions of the surface (:func:`curve_frames`), with the curve's
+    points and tangents as they were made: those of
+    ``seam_frames(V, ..., curve_points=points)``. A curve that moves needs a
+    new one.
 
     Attributes
     ----------
@@ -306,7 +309,9 @@ def curve_faces(
 def curve_frames(V: np.ndarray, kept: CurveFaces) -> SeamFrames:
     """The frames of :func:`seam_frames` at positions ``V`` (n, 3), from ``curve_faces(...)``.
 
-    Only the corners of the faces at the curve are read. The normal at a
+    The curve's points and tangents are the kept ones (``kept.points``,
+    ``kept.tangent``). Only the corners of the faces at the curve are read
+    (with a radius, the vertices within it as well). The normal at a
     curve vertex is the area-weighted mean of its faces' normals (or, with a
     radius, the quadric fit's); the inward direction ``unit(normal ×
     tangent)`` points towards the area-weighted mean of its faces'

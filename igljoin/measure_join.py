@@ -157,6 +157,8 @@ class RestMeasures:
 
     def curve_faces(self, seam: SeamGeometry) -> metrics.CurveFaces:
         """:func:`igljoin.metrics.curve_faces` of ``seam`` (its guest's faces at the curve)."""
+        # the host is rigid through a solver's life, so its curve's points and tangents (which
+        # the kept faces hold) are fixed by the curve's indices
         key = ("curve faces", seam.guest_at_host.tobytes(), seam.host_curve.tobytes(), seam.closed)
         return self._kept(key, lambda: metrics.curve_faces(seam))
 
