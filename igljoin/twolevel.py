@@ -409,7 +409,8 @@ class TwoLevelModel:
     without the dense block. Before anything is built, the entries the model
     will hold are counted (:attr:`model_entries`); above
     :data:`MAX_MODEL_ENTRIES` the model is refused (an ``OptionsError``) or,
-    with ``fall_back``, stays the factored ``P`` (:attr:`fallback` says why).
+    with ``fall_back`` and above :data:`AUTO_MAX_MODEL_ENTRIES`, stays the
+    factored ``P`` (:attr:`fallback` says why).
 
     What a build keeps: the coarse system and its factorization, the
     operators' cluster patterns and every free vertex's motions
