@@ -42,7 +42,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from . import coarse_kernels as ck
-from .errors import OptionsError
+from .errors import OptionsError, SolveError
 from .linsolve import AugmentedQuadratic, FixedQuadratic, available_backends
 from .newton import (
     dofs,
@@ -445,9 +445,10 @@ class TwoLevelModel:
         Earliest iteration at which a rebuild is made.
     fall_back : bool
         When the model would hold more than :data:`MAX_MODEL_ENTRIES`
-        entries (:data:`AUTO_MAX_MODEL_ENTRIES` with ``fall_back``): keep
-        the factored ``P`` alone (``True``, what ``preconditioner="auto"``
-        asks) instead of raising ``OptionsError``.
+        entries (:data:`AUTO_MAX_MODEL_ENTRIES` with ``fall_back``), or its
+        coarse system cannot be factored soundly: keep the factored ``P``
+        alone (``True``, what ``preconditioner="auto"`` asks) instead of
+        raising ``OptionsError`` or ``SolveError``.
 
     Attributes
     ----------
@@ -475,8 +476,10 @@ class TwoLevelModel:
     factors : list or None
         The balancing form's :func:`igljoin.newton.gauss_newton_factors`.
     fallback : str or None
-        Why the coarse correction was not built (``fall_back`` and too many
-        entries): the model is then ``P⁻¹`` alone; ``None`` otherwise.
+        Why the coarse correction was not built or given up (``fall_back``
+        and too many entries, or a coarse system that could not be factored
+        soundly, at the first build or a rebuild): the model is then ``P⁻¹``
+        alone for the rest of its use; ``None`` otherwise.
     """
 
     def __init__(
@@ -588,7 +591,19 @@ class TwoLevelModel:
         coarse, values = self._project(state)
         model += values
         t3 = time.perf_counter()
-        self.coarse_factor = self._factor(*coarse)
+        try:
+            self.coarse_factor = self._factor(*coarse)
+        except SolveError as exc:
+            if not self.fall_back:
+                raise
+            # a coarse system Pardiso cannot factor soundly (pivots perturbed, its probe
+            # solve off): "auto" goes on with P alone, as past its size limit
+            self.fallback = f"{exc}; the iteration went on with the factored form alone"
+            self.motions = None
+            self.seconds["clusters"] += t1 - t0
+            self.seconds["model"] += model
+            self.seconds["coarse"] += t3 - t1 - model
+            return False
         self.factorizations += 1
         self.built_at.append(int(iteration))
         if state.rotations is not None:

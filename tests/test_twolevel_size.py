@@ -177,3 +177,26 @@ def test_a_singular_coarse_system_is_refused_with_the_way_out():
     A = (S + U.T @ U).toarray()
     # a 4 x 4 LDLᵀ solve: rounding, far below 1e-12
     assert np.abs(A @ f.solve_free(b) - b).max() <= 1e-12 * np.abs(b).max()
+
+
+@pardiso
+def test_auto_goes_on_with_p_when_its_coarse_system_cannot_be_factored():
+    # a 30k-vertex patch (the benchmark's patch phantom, 1,180 guest vertices at resolution
+    # 1, at 30,000): its bending coarse system has pivots Pardiso perturbs and the probe
+    # solve refuses it; before, this default join failed with that SolveError
+    s = igljoin.phantoms.paper_sample(
+        "partial_patch", "equal", guest_resolution=float(np.sqrt(30_000 / 1180))
+    )
+    solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    assert len(solver.solver.free) >= twolevel.AUTO_FROM_VERTICES
+    auto = solver.solve()
+    assert auto.converged and solver.last_run.stats["model_builds"] == 0
+    assert "could not be factored" in solver.last_model.fallback
+    assert "factored form alone" in solver.last_model.fallback
+    # P alone from the first iteration: the factored form's very iterations
+    factored = solver.solve(preconditioner="factored")
+    assert auto.iterations == factored.iterations and auto.energy == factored.energy
+    # the same model without the fallback refuses it, naming the way out
+    model = twolevel.TwoLevelModel(solver.solver, **twolevel.AUTO_MODEL)
+    with pytest.raises(igljoin.SolveError, match="preconditioner='factored'"):
+        model.refresh(_start(solver), 1)
