@@ -200,6 +200,14 @@ class JoinSolver:
     rebuilds the factorization forgets them, a change of the iteration
     settings does not (it leaves the minima where they are).
 
+    The coarse model of ``preconditioner="auto"`` (large guests) or
+    ``"two-level"`` is kept too (:attr:`last_model`): the next solve reuses
+    its clusters and patterns, and its factorization unless the new start
+    has turned from where it was last built (then it is rebuilt there;
+    :func:`igljoin.twolevel.preferred_model`). A new set-up, another
+    preconditioner or ``acceleration=0`` drops it; so does a solve whose
+    model was refused or failed.
+
     A host of more than ``HOST_CHECK_ALL_FACES`` (200,000) faces whose
     curves are given by vertex indices is checked, selected and measured
     near its curves only (docs/limits.md, *Large hosts*).
@@ -259,7 +267,9 @@ class JoinSolver:
         self.factorizations = 0
         self.last_run = None  # IterationResult of the latest solve (iteration statistics)
         # the latest solve's coarse model (igljoin.twolevel.TwoLevelModel), None for P alone;
-        # its ``fallback`` says why "auto" kept P where the model would not fit
+        # its ``fallback`` says why "auto" kept P where the model would not fit. The next
+        # solve continues with it while the set-up and the preconditioner stand (its
+        # built_at and seconds then run on across the solves)
         self.last_model = None
         self.timings: dict[str, float] = {"select": time.perf_counter() - t0}
         self._prepare()
@@ -306,6 +316,8 @@ class JoinSolver:
         # made on a solve's first use (see _bumped, initial_guess) and kept until the next set-up
         self._bump = None
         self._bulge_basis: Any = _UNSET
+        # the coarse model (twolevel.preferred_model) kept for the next solve on this set-up
+        self._model = None
         self._forget_path()
         self.timings.update(correspond=t1 - t0, terms=t2 - t1, factor=solver.factor_seconds)
 
@@ -512,19 +524,27 @@ class JoinSolver:
             elapsed = time.perf_counter() - t1
             progress(SolveProgress(iteration, opt.max_iterations, float(energy), elapsed))
 
-        model = preferred_model(self.solver, opt)
-        run = self.solver.run(
-            X0,
-            bc,
-            max_iterations=opt.max_iterations,
-            tolerance=opt.energy_tolerance,
-            time_limit=opt.time_limit,
-            scale=self.guest_mean_edge,
-            acceleration=opt.acceleration,
-            callback=None if progress is None else report,
-            model=model,
-            memory=None if kept is None else kept.memory,
-        )
+        # the coarse model of the solve before, kept while its set-up and choice stand
+        model = preferred_model(self.solver, opt, self._model)
+        try:
+            run = self.solver.run(
+                X0,
+                bc,
+                max_iterations=opt.max_iterations,
+                tolerance=opt.energy_tolerance,
+                time_limit=opt.time_limit,
+                scale=self.guest_mean_edge,
+                acceleration=opt.acceleration,
+                callback=None if progress is None else report,
+                model=model,
+                memory=None if kept is None else kept.memory,
+            )
+        except BaseException:
+            # a model refused or stopped mid-build is not one to continue from
+            self._model = None
+            raise
+        if model is not None:
+            self._model = model
         t2 = time.perf_counter()
         if run.memory is not None and run.memory.S.nbytes + run.memory.Y.nbytes > PAIRS_MAX_BYTES:
             run.memory = None  # neither kept nor held by last_run past the run

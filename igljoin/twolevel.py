@@ -440,9 +440,11 @@ class TwoLevelModel:
         Radians a vertex's rotation may turn from its value at the last
         build before the coarse space is rebuilt; ``None``: built once.
     max_rebuilds : int or None
-        Rebuilds allowed after the first build (``None``: no limit).
+        Rebuilds allowed in a run after its first build (``None``: no
+        limit).
     first_rebuild : int
-        Earliest iteration at which a rebuild is made.
+        Earliest iteration of a run at which a rebuild is made (a kept
+        model's rebuild at a run's start excepted, see :meth:`refresh`).
     fall_back : bool
         When the model would hold more than :data:`MAX_MODEL_ENTRIES`
         entries (:data:`AUTO_MAX_MODEL_ENTRIES` with ``fall_back``), or its
@@ -457,11 +459,15 @@ class TwoLevelModel:
     factorizations : int
         Coarse factorizations made (builds).
     built_at : list of int
-        Iteration of every build.
+        Iteration of every build (of every run it served: a model kept
+        across solves counts on).
     seconds : dict
         ``clusters``, ``model`` (the Gauss–Newton model's values, and the
         balancing form's factors), ``coarse`` (``Aᵀ H A``) and ``factor``
-        times, summed over the builds.
+        times, summed over the builds (of every run it served).
+    spec : tuple or None
+        What :func:`preferred_model` made it from (``None`` when made
+        directly): a kept model serves a later solve with the same.
     coarse_entries : int or None
         Entries of the coarse system counted at the first refresh (an upper
         bound with band rows kept apart: their rows of zero weight are left
@@ -522,6 +528,10 @@ class TwoLevelModel:
         self.built_rotations = None
         self.coarse_factor = None
         self.factorizations = 0
+        # factorizations before the current run's first build (max_rebuilds counts per run)
+        self._run_base = 0
+        # what preferred_model made it from (None when made directly)
+        self.spec = None
         self.seconds = {"clusters": 0.0, "model": 0.0, "coarse": 0.0, "factor": 0.0}
 
     def turned(self, state) -> float:
@@ -536,21 +546,44 @@ class TwoLevelModel:
     def refresh(self, state, iteration: int) -> bool:
         """Build the coarse correction at ``state`` when due.
 
+        ``iteration`` 1 starts a run. A model already built (kept from an
+        earlier run, see :func:`preferred_model`) is rebuilt there if a free
+        vertex's rotation at the start has turned more than ``rebuild_angle``
+        from the last build (always with ``rebuild_angle=None``: built once per
+        run), whatever ``first_rebuild`` says: a new model would be built at
+        the same place. ``first_rebuild`` and ``max_rebuilds`` count within
+        the run.
+
         Returns ``True`` at the first build only (the solver then drops its
-        quasi-Newton memory, of which there is none yet).
+        quasi-Newton memory, of which there is none yet); a rebuild at a later
+        run's start keeps the pairs that run starts with.
         """
         first = self.labels is None
         if self.fallback is not None:
             return False
-        if not first:
+        if not first and iteration <= 1:
+            # a new run of a model built before (kept across solves): the start is where a
+            # new model would be built, so first_rebuild does not hold it back; it is rebuilt
+            # there unless its rotation test finds the start near its build (built once,
+            # rebuild_angle=None, is once per run). The run's own count starts with the
+            # build it starts on
+            if self.rebuild_angle is not None and self.turned(state) <= self.rebuild_angle:
+                self._run_base = self.factorizations - 1
+                return False
+        elif not first:
             if (
                 self.rebuild_angle is None
                 or iteration < self.first_rebuild
-                or (self.max_rebuilds is not None and self.factorizations > self.max_rebuilds)
+                or (
+                    self.max_rebuilds is not None
+                    and self.factorizations - self._run_base > self.max_rebuilds
+                )
             ):
                 return False
             if self.turned(state) <= self.rebuild_angle:
                 return False
+        if iteration <= 1:
+            self._run_base = self.factorizations
         ls = self.solver
         t0 = time.perf_counter()
         X = state.X[ls.free]
@@ -860,7 +893,21 @@ AUTO_FROM_VERTICES = 20_000
 AUTO_MODEL = {"bending": True, "rebuild_angle": 0.2, "first_rebuild": 6}
 
 
-def preferred_model(solver, options):
+def _model_spec(solver, options):
+    """What :func:`preferred_model` makes for ``options``: ``None`` (``P`` alone) or
+    ``(choice, keyword arguments, entry limit)``, the module values read now."""
+    choice = options.preconditioner
+    if options.acceleration == 0 or choice == "factored":
+        return None
+    if choice == "two-level":
+        return ("two-level", (), MAX_MODEL_ENTRIES)
+    if len(solver.free) >= AUTO_FROM_VERTICES:
+        kwargs = (*sorted(AUTO_MODEL.items()), ("fall_back", True))
+        return ("auto", kwargs, AUTO_MAX_MODEL_ENTRIES)
+    return None
+
+
+def preferred_model(solver, options, kept=None):
     """The quasi-Newton model a join uses for ``options.preconditioner``.
 
     Parameters
@@ -868,6 +915,14 @@ def preferred_model(solver, options):
     solver : LocalGlobalSolver
         The join's iteration (its free vertices count).
     options : JoinOptions
+    kept : TwoLevelModel, optional
+        A model this function made before (for an earlier solve): returned
+        itself, with its clusters, patterns and factorization, when it was
+        made on ``solver`` for the same choice (the same preconditioner and
+        the same module values :data:`AUTO_FROM_VERTICES`,
+        :data:`AUTO_MODEL` and the entry limits); a new model otherwise.
+        Its next :meth:`TwoLevelModel.refresh` at iteration 1 rebuilds it
+        if the new start has turned from its last build.
 
     Returns
     -------
@@ -881,11 +936,11 @@ def preferred_model(solver, options):
         :data:`AUTO_MAX_MODEL_ENTRIES` stays ``P`` alone and says so in its
         ``fallback``.
     """
-    choice = options.preconditioner
-    if options.acceleration == 0 or choice == "factored":
+    spec = _model_spec(solver, options)
+    if spec is None:
         return None
-    if choice == "two-level":
-        return TwoLevelModel(solver)
-    if len(solver.free) >= AUTO_FROM_VERTICES:
-        return TwoLevelModel(solver, **AUTO_MODEL, fall_back=True)
-    return None
+    if kept is not None and kept.solver is solver and kept.spec == spec:
+        return kept
+    model = TwoLevelModel(solver, **dict(spec[1]))
+    model.spec = spec
+    return model

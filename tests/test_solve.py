@@ -732,6 +732,10 @@ def test_a_refused_solve_takes_back_its_option_changes(patch, monkeypatch):
     monkeypatch.setattr(twolevel, "MAX_MODEL_ENTRIES", 100)
     with pytest.raises(igljoin.OptionsError, match="MAX_MODEL_ENTRIES"):
         solver.solve(preconditioner="two-level")
+    # the refused model is not kept for the next solve: asked again, it is refused again
+    # (a kept one, its clusters already made, would be built past the limit)
+    with pytest.raises(igljoin.OptionsError, match="MAX_MODEL_ENTRIES"):
+        solver.solve(preconditioner="two-level")
     with pytest.raises(igljoin.OptionsError, match="targets must be"):
         solver.solve(np.zeros((2, 3)), energy_tolerance=1e-3)
     monkeypatch.undo()

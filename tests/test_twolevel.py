@@ -318,3 +318,99 @@ def test_a_run_counts_its_model_builds_and_rebuilds(patch):
     assert again.stats["model_builds"] == model.factorizations - run.stats["model_builds"]
     plain = ls.run(patch.initial_guess(), patch.corr.targets, max_iterations=3)
     assert plain.stats["model_builds"] == 0
+
+
+def test_a_kept_model_is_rebuilt_at_a_new_runs_start_only_if_it_turned(patch):
+    ls = patch.solver
+    start, later = _moved_states(patch)
+    angle = _turn_between(ls, start, later)
+    assert angle > 0.0
+    model = twolevel.TwoLevelModel(ls, rebuild_angle=0.5 * angle, first_rebuild=6, max_rebuilds=0)
+    assert model.refresh(start, 1) and model.factorizations == 1
+    # a new run starting where it was built: the kept factorization serves it
+    assert not model.refresh(start, 1) and model.factorizations == 1
+    # a new run starting turned from it: rebuilt at the start, as a new model would be,
+    # though first_rebuild is 6 and no rebuild is allowed within a run (the pairs are kept)
+    assert not model.refresh(later, 1) and model.factorizations == 2
+    assert model.turned(later) == 0.0 and model.built_at == [1, 1]
+    # within that run max_rebuilds=0 holds from its first build on
+    assert not model.refresh(start, 7) and model.factorizations == 2
+    # built once (rebuild_angle=None) is once per run
+    once = twolevel.TwoLevelModel(ls)
+    once.refresh(start, 1)
+    once.refresh(start, 1)
+    assert once.factorizations == 2
+
+
+def _turn_between(ls, start, later):
+    """The largest turn of a free vertex's rotation between two states (radians)."""
+    probe = twolevel.TwoLevelModel(ls)
+    probe.built_rotations = start.rotations[ls.free].copy()
+    return probe.turned(later)
+
+
+def _turned_targets(targets, degrees):
+    """``targets`` (s, 3) turned about the z axis through their centroid."""
+    a = np.radians(degrees)
+    R = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    c = targets.mean(axis=0)
+    return (targets - c) @ R.T + c
+
+
+def test_a_solver_keeps_its_coarse_model_across_re_solves(monkeypatch):
+    monkeypatch.setattr(twolevel, "AUTO_FROM_VERTICES", 0)
+    solver = _solver("partial_patch")
+    first = solver.solve()
+    model, builds = solver.last_model, [solver.last_run.stats["model_builds"]]
+    labels = model.labels
+    T = _turned_targets(first.seam_targets, 1.0)
+    cold = solver.solve(T)
+    builds.append(solver.last_run.stats["model_builds"])
+    warm = solver.solve(T, start=first)
+    builds.append(solver.last_run.stats["model_builds"])
+    # the same model, its clusters and patterns those of the first build
+    assert solver.last_model is model and model.labels is labels
+    # every run counted its own builds, none twice
+    assert sum(builds) == model.factorizations == len(model.built_at) and builds[0] >= 1
+    # the reference: a new solver's solve of the same targets, with a model of its own
+    fresh = _solver("partial_patch")
+    ref = fresh.solve(T)
+    assert fresh.last_model is not model
+    for res in (cold, warm):
+        gap = abs(res.energy[-1] - ref.energy[-1]) / ref.energy[-1]
+        # the project's convergence requirement: the same minimum within 1e-6 (relative)
+        assert res.converged and gap <= 1e-6
+    # a new set-up, or another preconditioner, drops it
+    solver.solve(preconditioner="two-level")
+    assert solver.last_model is not model and not solver.last_model.bending
+    rigid = solver.last_model
+    solver.update(snap_fraction=0.2)
+    solver.solve()
+    assert solver.last_model is not rigid and solver.last_model.solver is solver.solver
+    assert not solver.last_model.bending  # still two-level, on the new set-up
+    # so does a changed choice of the module's values
+    solver.solve(preconditioner="auto")
+    kept = solver.last_model
+    assert kept.bending and kept.rebuild_angle == twolevel.AUTO_MODEL["rebuild_angle"]
+    monkeypatch.setattr(twolevel, "AUTO_MODEL", {**twolevel.AUTO_MODEL, "rebuild_angle": 0.3})
+    solver.solve()
+    assert solver.last_model is not kept and solver.last_model.rebuild_angle == 0.3
+
+
+def test_a_kept_model_whose_rebuild_failed_is_dropped(monkeypatch):
+    solver = _solver("partial_patch")
+    solver.solve(preconditioner="two-level")
+    model = solver.last_model
+
+    def refuse(self, *args):
+        raise igljoin.SolveError("the coarse system could not be factored (a stand-in)")
+
+    # built once per run: the next solve rebuilds the kept model at its start, and fails
+    monkeypatch.setattr(twolevel.TwoLevelModel, "_factor", refuse)
+    with pytest.raises(igljoin.SolveError, match="stand-in"):
+        solver.solve()
+    monkeypatch.undo()
+    # its factorization let go, it is not continued from: a new model is built
+    again = solver.solve()
+    assert solver.last_model is not model and again.converged
+    assert solver.last_run.stats["model_builds"] == solver.last_model.factorizations == 1
