@@ -206,7 +206,8 @@ class JoinSolver:
     has turned from where it was last built (then it is rebuilt there;
     :func:`igljoin.twolevel.preferred_model`). A new set-up, another
     preconditioner or ``acceleration=0`` drops it; so does a solve whose
-    model was refused or failed.
+    model was refused or failed, and a model whose coarse system could not
+    be factored soundly is not kept (the next solve makes a new one).
 
     A host of more than ``HOST_CHECK_ALL_FACES`` (200,000) faces whose
     curves are given by vertex indices is checked, selected and measured
@@ -540,11 +541,13 @@ class JoinSolver:
                 memory=None if kept is None else kept.memory,
             )
         except BaseException:
-            # a model refused or stopped mid-build is not one to continue from
-            self._model = None
+            # a model refused or stopped mid-build is not one to continue from (one kept
+            # before, not this solve's, stays)
+            if self._model is model:
+                self._model = None
             raise
-        if model is not None:
-            self._model = model
+        # P alone (None) lets the kept model go: its coarse factorization is large
+        self._model = model
         t2 = time.perf_counter()
         if run.memory is not None and run.memory.S.nbytes + run.memory.Y.nbytes > PAIRS_MAX_BYTES:
             run.memory = None  # neither kept nor held by last_run past the run

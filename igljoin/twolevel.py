@@ -468,6 +468,9 @@ class TwoLevelModel:
     spec : tuple or None
         What :func:`preferred_model` made it from (``None`` when made
         directly): a kept model serves a later solve with the same.
+    unsound : bool
+        Its coarse system could not be factored soundly at some build (the
+        ``fallback`` then says so): :func:`preferred_model` does not keep it.
     coarse_entries : int or None
         Entries of the coarse system counted at the first refresh (an upper
         bound with band rows kept apart: their rows of zero weight are left
@@ -532,6 +535,8 @@ class TwoLevelModel:
         self._run_base = 0
         # what preferred_model made it from (None when made directly)
         self.spec = None
+        # its coarse system failed to factor soundly at some state (fallback says so)
+        self.unsound = False
         self.seconds = {"clusters": 0.0, "model": 0.0, "coarse": 0.0, "factor": 0.0}
 
     def turned(self, state) -> float:
@@ -555,8 +560,9 @@ class TwoLevelModel:
         the run.
 
         Returns ``True`` at the first build only (the solver then drops its
-        quasi-Newton memory, of which there is none yet); a rebuild at a later
-        run's start keeps the pairs that run starts with.
+        quasi-Newton memory: none yet, or the pairs a re-solve along a path
+        started with — valid under another initial inverse Hessian too, so
+        only work lost); a rebuild at a later run's start keeps them.
         """
         first = self.labels is None
         if self.fallback is not None:
@@ -567,7 +573,11 @@ class TwoLevelModel:
             # there unless its rotation test finds the start near its build (built once,
             # rebuild_angle=None, is once per run). The run's own count starts with the
             # build it starts on
-            if self.rebuild_angle is not None and self.turned(state) <= self.rebuild_angle:
+            if (
+                self.coarse_factor is not None
+                and self.rebuild_angle is not None
+                and self.turned(state) <= self.rebuild_angle
+            ):
                 self._run_base = self.factorizations - 1
                 return False
         elif not first:
@@ -632,7 +642,10 @@ class TwoLevelModel:
             # a coarse system Pardiso cannot factor soundly (pivots perturbed, its probe
             # solve off): "auto" goes on with P alone, as past its size limit
             self.fallback = f"{exc}; the iteration went on with the factored form alone"
-            self.motions = None
+            # the values, not the set-up, failed: a later solve makes a new model
+            self.unsound = True
+            self.motions = self.factors = None
+            self.seconds["factor"] += time.perf_counter() - t3
             self.seconds["clusters"] += t1 - t0
             self.seconds["model"] += model
             self.seconds["coarse"] += t3 - t1 - model
@@ -919,8 +932,8 @@ def preferred_model(solver, options, kept=None):
         A model this function made before (for an earlier solve): returned
         itself, with its clusters, patterns and factorization, when it was
         made on ``solver`` for the same choice (the same preconditioner and
-        the same module values :data:`AUTO_FROM_VERTICES`,
-        :data:`AUTO_MODEL` and the entry limits); a new model otherwise.
+        the same module values :data:`AUTO_MODEL` and the entry limits) and
+        its coarse system did not fail to factor; a new model otherwise.
         Its next :meth:`TwoLevelModel.refresh` at iteration 1 rebuilds it
         if the new start has turned from its last build.
 
@@ -939,7 +952,7 @@ def preferred_model(solver, options, kept=None):
     spec = _model_spec(solver, options)
     if spec is None:
         return None
-    if kept is not None and kept.solver is solver and kept.spec == spec:
+    if kept is not None and kept.solver is solver and kept.spec == spec and not kept.unsound:
         return kept
     model = TwoLevelModel(solver, **dict(spec[1]))
     model.spec = spec

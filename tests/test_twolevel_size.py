@@ -193,10 +193,18 @@ def test_auto_goes_on_with_p_when_its_coarse_system_cannot_be_factored():
     assert auto.converged and solver.last_run.stats["model_builds"] == 0
     assert "could not be factored" in solver.last_model.fallback
     assert "factored form alone" in solver.last_model.fallback
-    # P alone from the first iteration: the factored form's very iterations
+    # its values failed, not its size: the next solve would make a new model, not keep it
+    assert solver.last_model.unsound
+    kept = twolevel.preferred_model(solver.solver, solver.options, solver.last_model)
+    assert kept is not solver.last_model and kept.labels is None
+    # P alone from the first iteration: the factored form's very iterations; and a solve
+    # with P alone lets the kept model go
     factored = solver.solve(preconditioner="factored")
     assert auto.iterations == factored.iterations and auto.energy == factored.energy
-    # the same model without the fallback refuses it, naming the way out
+    assert solver._model is None
+    # the same model without the fallback refuses it, naming the way out, and tries again
+    # at the next run's start instead of going on without a coarse factorization
     model = twolevel.TwoLevelModel(solver.solver, **twolevel.AUTO_MODEL)
-    with pytest.raises(igljoin.SolveError, match="preconditioner='factored'"):
-        model.refresh(_start(solver), 1)
+    for _ in range(2):
+        with pytest.raises(igljoin.SolveError, match="preconditioner='factored'"):
+            model.refresh(_start(solver), 1)
