@@ -37,7 +37,6 @@ convergence by about 40 % (docs/benchmarks.md), to the same minimum.
 
 from __future__ import annotations
 
-import copy
 import math
 import time
 from dataclasses import dataclass, field
@@ -399,11 +398,11 @@ class LocalGlobalSolver:
             np.broadcast_to(np.asarray(bc, dtype=np.float64), (len(fixed), 3))
         )
 
+        n = self.n
+
         def local(x, hint):
             t0 = time.perf_counter()
-            X = np.empty((self.n, 3))
-            kernels.place_rows(X, free, x)
-            kernels.place_rows(X, fixed, bc)
+            X = kernels.join_rows(n, free, x, fixed, bc)
             state, e, G = self.local(X, hint)
             clock["local"] += time.perf_counter() - t0
             stats["local_steps"] += 1
@@ -462,7 +461,7 @@ class LocalGlobalSolver:
                 gd = kernels.dot(g, d)
             t = 1.0
             for _ in range(_MAX_BACKTRACKS + 1):
-                x_new = x + t * d
+                x_new = kernels.step(x, t, d)
                 state_new, e_new, g_new = local(x_new, hint)
                 # Armijo on E with directional derivative 2 gᵀd
                 if e_new <= e + _ARMIJO * t * 2.0 * gd or acceleration == 0:
@@ -471,7 +470,7 @@ class LocalGlobalSolver:
                 # backtrack with the minimiser of the quadratic through e, slope and e_new
                 denom = e_new - e - 2.0 * gd * t
                 t_q = -gd * t * t / denom if denom > 0 else 0.5 * t
-                t = float(np.clip(t_q, 0.1 * t, 0.5 * t))
+                t = min(max(t_q, 0.1 * t), 0.5 * t)
             else:
                 # no acceptable step along d: drop the memory, take the plain local/global
                 # step (Q's), which always lowers the energy
@@ -479,11 +478,11 @@ class LocalGlobalSolver:
                 stats["restarts"] += 1
                 t = 1.0
                 d = -back_solve(g, plain=True)
-                x_new = x + d
+                x_new = kernels.step(x, 1.0, d)
                 state_new, e_new, g_new = local(x_new, hint)
             if acceleration > 0:
                 memory.push(x_new, x, g_new, g)
-            move = t * float(np.abs(d).max())
+            move = t * kernels.abs_max(d)
             x, e, g, state = x_new, e_new, g_new, state_new
             energy.append(e)
             result.iterations = it
@@ -595,7 +594,12 @@ class QuasiNewtonMemory:
 
     def copy(self) -> QuasiNewtonMemory:
         """An independent copy (its buffers copied)."""
-        return copy.deepcopy(self)
+        other = QuasiNewtonMemory.__new__(QuasiNewtonMemory)
+        other.m = self.m
+        other.S, other.Y = self.S.copy(), self.Y.copy()
+        other.rho, other.alpha = self.rho.copy(), self.alpha.copy()
+        other.order, other.unused = list(self.order), list(self.unused)
+        return other
 
     @property
     def size(self) -> int:
