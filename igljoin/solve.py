@@ -102,6 +102,10 @@ class IterationResult:
         The quasi-Newton pairs held at the end (``None`` for the plain
         iteration): a later run of the same solver may start from them
         (``run(memory=...)``).
+    rotations : ndarray, shape (n, 3, 3), or None
+        The rotations fitted by the last local step (at ``X``; ``None`` when no
+        term fits rotations): a later run from near ``X`` may start its first
+        rotation fit from them (``run(rotations=...)``).
     """
 
     X: np.ndarray
@@ -112,6 +116,7 @@ class IterationResult:
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
     memory: QuasiNewtonMemory | None = None
+    rotations: np.ndarray | None = None
 
 
 class LocalGlobalSolver:
@@ -325,6 +330,7 @@ class LocalGlobalSolver:
         callback=None,
         model=None,
         memory: QuasiNewtonMemory | None = None,
+        rotations: np.ndarray | None = None,
     ) -> IterationResult:
         """Iterate from ``X0`` (shape (n, 3)) until the iterates settle.
 
@@ -377,6 +383,13 @@ class LocalGlobalSolver:
             predicted from): the first step then already knows the curvature
             they measured. Copied, not changed; ignored unless it holds pairs
             of this run's ``acceleration`` and size.
+        rotations : ndarray, shape (n, 3, 3), optional
+            Rotations to start the first local step's rotation fit from
+            (e.g. ``IterationResult.rotations`` of the run whose result ``X0``
+            was predicted from, turned as it was turned); without them the fit
+            starts each vertex from its neighbour's rotation. Either start ends
+            at the same rotations to within the fit's tolerance; from a near one
+            the fit takes fewer steps.
 
         Returns
         -------
@@ -431,7 +444,7 @@ class LocalGlobalSolver:
 
         x = np.ascontiguousarray(X[free])
         # g: half the gradient of E on the free rows
-        state, e, g = local(x, None)
+        state, e, g = local(x, rotations)
         energy = [e]
         if memory is not None and memory.fits(acceleration, g.shape):
             memory = memory.copy()
@@ -509,6 +522,7 @@ class LocalGlobalSolver:
             stats["model_builds"] = model.factorizations - builds_before
         result.stats = stats
         result.memory = memory if acceleration > 0 else None
+        result.rotations = state.rotations
         return result
 
 
