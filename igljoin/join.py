@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from . import kernels
 from . import seams as seams_
 from .errors import OptionsError
 from .host_values import HostValues
@@ -532,7 +533,7 @@ class JoinSolver:
             X0, turn = self._warm_start(start, bc, kept)
             if kept is not None and kept.rotations is not None:
                 # the rotations the path's last run ended with, turned as the start was
-                hint = np.matmul(turn, kept.rotations)
+                hint = kernels.turn_rotations(turn, kept.rotations)
         t1 = time.perf_counter()
 
         def report(iteration: int, energy: float) -> None:
