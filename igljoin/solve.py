@@ -40,6 +40,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -236,7 +237,7 @@ class LocalGlobalSolver:
         rhs = np.zeros((self.n, 3))
         for term in self.terms:
             e += term.local_into(state, rhs)
-        if not np.isfinite(e):
+        if not math.isfinite(e):
             raise SolveError(
                 "the solve produced non-finite positions; the guest has degenerate or "
                 "collapsed faces — repair it with igljoin.clean and retry"
@@ -552,18 +553,24 @@ class _FloorTest:
     The floor is ``tolerance² tr(X̄ᵀ Q X̄)``, at most ``tolerance² λ ‖X̄‖²`` with
     ``λ`` :meth:`LocalGlobalSolver.stiffness_bound`; an energy above that bound
     (every real join's, by orders) is above the floor without making it (a
-    sparse product with ``Q``), and the answer is the same.
+    sparse product with ``Q``), and the answer is the same. The bound too is
+    made on the first question (a run asks only once its steps are small).
     """
 
     def __init__(self, solver: LocalGlobalSolver, X: np.ndarray, tolerance: float):
         self.solver, self.X, self.tolerance = solver, X, tolerance
         self.floor: float | None = None
-        self.bound = math.inf
-        stiffness = solver.stiffness_bound()
-        if stiffness is not None:
-            Xc = X - np.mean(X, axis=0)
-            # 1e-6: far above the rounding of either sum, so the bound stays a bound
-            self.bound = (1.0 + 1e-6) * tolerance * tolerance * stiffness * float(np.vdot(Xc, Xc))
+
+    @cached_property
+    def bound(self) -> float:
+        """An upper bound of the floor (``inf`` where ``Q``'s stiffness bound is not known)."""
+        stiffness = self.solver.stiffness_bound()
+        if stiffness is None:
+            return math.inf
+        X, tolerance = self.X, self.tolerance
+        Xc = X - np.mean(X, axis=0)
+        # 1e-6: far above the rounding of either sum, so the bound stays a bound
+        return (1.0 + 1e-6) * tolerance * tolerance * stiffness * float(np.vdot(Xc, Xc))
 
     def reached(self, e: float) -> bool:
         """The energy ``e`` is at or below the floor."""
