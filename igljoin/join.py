@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from . import kernels
 from . import seams as seams_
 from .errors import OptionsError
 from .host_values import HostValues
@@ -29,7 +30,7 @@ from .options import JoinOptions
 from .result import JoinResult
 from .seams import SeamPair
 from .solve import LocalGlobalSolver, QuasiNewtonMemory
-from .start import bulge, bulge_basis, path_prediction, rigid_start
+from .start import bulge, bulge_basis, path_prediction, rigid_start, rigid_turn
 from .stiffness import needs_guest, resolve_stiffness
 from .terms import unique_edges
 from .twolevel import preferred_model
@@ -85,11 +86,16 @@ class _Kept:
     memory : QuasiNewtonMemory or None
         Its run's quasi-Newton pairs, kept for a result on a path (``earlier``
         not empty): the next re-solve along the path starts with them.
+    rotations : ndarray, shape (n', 3, 3), or None
+        The rotations its run's last local step fitted, kept with the pairs:
+        the next re-solve's first rotation fit starts from them, turned as its
+        start was turned.
     """
 
     X: np.ndarray
     earlier: tuple
     memory: QuasiNewtonMemory | None
+    rotations: np.ndarray | None = None
 
 
 def _guest_mesh(guest: Any) -> Mesh:
@@ -196,7 +202,9 @@ class JoinSolver:
     it (so a solve in between, e.g. a cold one, does not cut a path), and
     the quasi-Newton pairs of the newest ``PAIRS_KEPT`` (2) results on a
     path (2 × (acceleration + 1) × 3n' floats each, kept up to
-    ``PAIRS_MAX_BYTES``, 256 MiB); an option change that
+    ``PAIRS_MAX_BYTES``, 256 MiB), with the rotations their last local
+    step fitted (9n' floats; the next step's first rotation fit starts
+    from them, turned as its start was turned); an option change that
     rebuilds the factorization forgets them, a change of the iteration
     settings does not (it leaves the minima where they are).
 
@@ -397,14 +405,17 @@ class JoinSolver:
         ndarray, shape (n', 3)
         """
         X = self._start_positions(start)
-        return self._warm_start(X, targets, self._kept_at(X))
+        return self._warm_start(X, targets, self._kept_at(X))[0]
 
-    def _warm_start(self, X: np.ndarray, targets: np.ndarray, kept: _Kept | None) -> np.ndarray:
-        """:meth:`warm_start` from checked positions ``X`` (n', 3), kept as ``kept`` (or not)."""
+    def _warm_start(
+        self, X: np.ndarray, targets: np.ndarray, kept: _Kept | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`warm_start` from checked positions ``X`` (n', 3), kept as ``kept`` (or not),
+        and the rotation (3, 3) of its rigid motion."""
         seam = self.corr.seam
         X = path_prediction(X, [] if kept is None else list(kept.earlier), seam, targets)
-        X = rigid_start(X, seam, targets)
-        return X + self.solver.extend(targets - X[seam])
+        X, R = rigid_turn(X, seam, targets)
+        return X + self.solver.extend(targets - X[seam]), R
 
     def _start_positions(self, start: Any) -> np.ndarray:
         """``start`` as a checked (n', 3) array of positions (a copy)."""
@@ -442,11 +453,12 @@ class JoinSolver:
             return  # not a minimum: nothing to predict from
         earlier = () if before is None else (*before.earlier, before.X)[-PATH_LENGTH:]
         memory = run.memory if earlier else None
-        kept = [*self._kept, _Kept(np.array(X, dtype=np.float64), earlier, memory)]
+        rotations = None if memory is None else run.rotations
+        kept = [*self._kept, _Kept(np.array(X, dtype=np.float64), earlier, memory, rotations)]
         # the pairs are large (2 (acceleration + 1) 3n' floats): the newest PAIRS_KEPT only
         holding = [i for i, k in enumerate(kept) if k.memory is not None][:-PAIRS_KEPT]
         for i in holding:
-            kept[i] = replace(kept[i], memory=None)
+            kept[i] = replace(kept[i], memory=None, rotations=None)
         self._kept = kept[-KEPT_RESULTS:]
 
     def solve(
@@ -472,8 +484,8 @@ class JoinSolver:
             moved onto the targets rigidly and the rest of the move extended
             smoothly, after a prediction from the earlier results when the
             start ends a path of re-solves (:meth:`warm_start`; the
-            iteration then also starts with the quasi-Newton pairs of the
-            step before). A start at the minimum stops after one or two
+            iteration then also starts with the quasi-Newton pairs and the
+            rotations of the step before). A start at the minimum stops after one or two
             iterations.
         progress : callable, optional
             Called with a :class:`SolveProgress` after every iteration (for
@@ -512,13 +524,16 @@ class JoinSolver:
                 "seam vertex)"
             )
         t0 = time.perf_counter()
-        kept = None
+        kept = hint = None
         if start is None:
             X0 = self.initial_guess(bc)
         else:
             start = self._start_positions(start)
             kept = self._kept_at(start)
-            X0 = self._warm_start(start, bc, kept)
+            X0, turn = self._warm_start(start, bc, kept)
+            if kept is not None and kept.rotations is not None:
+                # the rotations the path's last run ended with, turned as the start was
+                hint = kernels.turn_rotations(turn, kept.rotations)
         t1 = time.perf_counter()
 
         def report(iteration: int, energy: float) -> None:
@@ -539,6 +554,7 @@ class JoinSolver:
                 callback=None if progress is None else report,
                 model=model,
                 memory=None if kept is None else kept.memory,
+                rotations=hint,
             )
         except BaseException:
             # a model refused or stopped mid-build is not one to continue from (one kept

@@ -35,7 +35,10 @@ __all__ = [
     "smooth_local",
     "band_local",
     "dot",
-    "place_rows",
+    "turn_rotations",
+    "join_rows",
+    "step",
+    "abs_max",
     "take_rows",
     "lbfgs_pair",
     "lbfgs_first_loop",
@@ -793,13 +796,71 @@ def lbfgs_second_loop(z, S, Y, rho, order, alpha):  # pragma: no cover - compile
 
 
 @nb.njit(cache=True)
-def place_rows(X, rows, values):  # pragma: no cover - compiled
-    """``X[rows] = values`` for ``X`` (n, 3) and ``values`` (len(rows), 3)."""
-    for k in range(rows.shape[0]):
-        r = rows[k]
-        X[r, 0] = values[k, 0]
-        X[r, 1] = values[k, 1]
-        X[r, 2] = values[k, 2]
+def turn_rotations(T, R):  # pragma: no cover - compiled
+    """``T R_v`` for each rotation ``R_v`` of ``R`` (n, 3, 3) and one ``T`` (3, 3): (n, 3, 3).
+
+    Each entry ``Σ_k T[i, k] R_v[k, j]`` summed left to right.
+    """
+    out = np.empty_like(R)
+    for v in range(R.shape[0]):
+        for i in range(3):
+            t0 = T[i, 0]
+            t1 = T[i, 1]
+            t2 = T[i, 2]
+            for j in range(3):
+                out[v, i, j] = t0 * R[v, 0, j] + t1 * R[v, 1, j] + t2 * R[v, 2, j]
+    return out
+
+
+@nb.njit(cache=True)
+def join_rows(n, free, x, fixed, bc):  # pragma: no cover - compiled
+    """An (n, 3) array with rows ``free`` from ``x`` and rows ``fixed`` from ``bc``.
+
+    ``X[free] = x; X[fixed] = bc`` in one call, for ``x`` (len(free), 3) and
+    ``bc`` (len(fixed), 3); rows in neither are left unset.
+    """
+    X = np.empty((n, 3))
+    for k in range(free.shape[0]):
+        r = free[k]
+        X[r, 0] = x[k, 0]
+        X[r, 1] = x[k, 1]
+        X[r, 2] = x[k, 2]
+    for k in range(fixed.shape[0]):
+        r = fixed[k]
+        X[r, 0] = bc[k, 0]
+        X[r, 1] = bc[k, 1]
+        X[r, 2] = bc[k, 2]
+    return X
+
+
+@nb.njit(cache=True)
+def step(x, t, d):  # pragma: no cover - compiled
+    """``x + t * d`` for two C-contiguous arrays of one shape, in a new array.
+
+    Each entry is the product rounded, then the sum (as numpy's two
+    operations round them: no fused multiply-add).
+    """
+    out = np.empty_like(x)
+    a = x.ravel()
+    b = d.ravel()
+    o = out.ravel()
+    for i in range(a.shape[0]):
+        o[i] = a[i] + t * b[i]
+    return out
+
+
+@nb.njit(cache=True)
+def abs_max(d):  # pragma: no cover - compiled
+    """``max |d|`` over a C-contiguous array (NaN if any entry is NaN, as numpy's)."""
+    b = d.ravel()
+    m = 0.0
+    for i in range(b.shape[0]):
+        v = abs(b[i])
+        if v > m:
+            m = v
+        elif v != v:
+            return v
+    return m
 
 
 @nb.njit(cache=True)

@@ -37,10 +37,10 @@ convergence by about 40 % (docs/benchmarks.md), to the same minimum.
 
 from __future__ import annotations
 
-import copy
 import math
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -103,6 +103,10 @@ class IterationResult:
         The quasi-Newton pairs held at the end (``None`` for the plain
         iteration): a later run of the same solver may start from them
         (``run(memory=...)``).
+    rotations : ndarray, shape (n, 3, 3), or None
+        The rotations fitted by the last local step (at ``X``; ``None`` when no
+        term fits rotations): a later run from near ``X`` may start its first
+        rotation fit from them (``run(rotations=...)``).
     """
 
     X: np.ndarray
@@ -113,6 +117,7 @@ class IterationResult:
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
     memory: QuasiNewtonMemory | None = None
+    rotations: np.ndarray | None = None
 
 
 class LocalGlobalSolver:
@@ -232,7 +237,7 @@ class LocalGlobalSolver:
         rhs = np.zeros((self.n, 3))
         for term in self.terms:
             e += term.local_into(state, rhs)
-        if not np.isfinite(e):
+        if not math.isfinite(e):
             raise SolveError(
                 "the solve produced non-finite positions; the guest has degenerate or "
                 "collapsed faces — repair it with igljoin.clean and retry"
@@ -326,6 +331,7 @@ class LocalGlobalSolver:
         callback=None,
         model=None,
         memory: QuasiNewtonMemory | None = None,
+        rotations: np.ndarray | None = None,
     ) -> IterationResult:
         """Iterate from ``X0`` (shape (n, 3)) until the iterates settle.
 
@@ -378,6 +384,13 @@ class LocalGlobalSolver:
             predicted from): the first step then already knows the curvature
             they measured. Copied, not changed; ignored unless it holds pairs
             of this run's ``acceleration`` and size.
+        rotations : ndarray, shape (n, 3, 3), optional
+            Rotations to start the first local step's rotation fit from
+            (e.g. ``IterationResult.rotations`` of the run whose result ``X0``
+            was predicted from, turned as it was turned); without them the fit
+            starts each vertex from its neighbour's rotation. Either start ends
+            at the same rotations to within the fit's tolerance; from a near one
+            the fit takes fewer steps.
 
         Returns
         -------
@@ -399,11 +412,11 @@ class LocalGlobalSolver:
             np.broadcast_to(np.asarray(bc, dtype=np.float64), (len(fixed), 3))
         )
 
+        n = self.n
+
         def local(x, hint):
             t0 = time.perf_counter()
-            X = np.empty((self.n, 3))
-            kernels.place_rows(X, free, x)
-            kernels.place_rows(X, fixed, bc)
+            X = kernels.join_rows(n, free, x, fixed, bc)
             state, e, G = self.local(X, hint)
             clock["local"] += time.perf_counter() - t0
             stats["local_steps"] += 1
@@ -432,7 +445,7 @@ class LocalGlobalSolver:
 
         x = np.ascontiguousarray(X[free])
         # g: half the gradient of E on the free rows
-        state, e, g = local(x, None)
+        state, e, g = local(x, rotations)
         energy = [e]
         if memory is not None and memory.fits(acceleration, g.shape):
             memory = memory.copy()
@@ -462,7 +475,7 @@ class LocalGlobalSolver:
                 gd = kernels.dot(g, d)
             t = 1.0
             for _ in range(_MAX_BACKTRACKS + 1):
-                x_new = x + t * d
+                x_new = kernels.step(x, t, d)
                 state_new, e_new, g_new = local(x_new, hint)
                 # Armijo on E with directional derivative 2 gᵀd
                 if e_new <= e + _ARMIJO * t * 2.0 * gd or acceleration == 0:
@@ -471,7 +484,7 @@ class LocalGlobalSolver:
                 # backtrack with the minimiser of the quadratic through e, slope and e_new
                 denom = e_new - e - 2.0 * gd * t
                 t_q = -gd * t * t / denom if denom > 0 else 0.5 * t
-                t = float(np.clip(t_q, 0.1 * t, 0.5 * t))
+                t = min(max(t_q, 0.1 * t), 0.5 * t)
             else:
                 # no acceptable step along d: drop the memory, take the plain local/global
                 # step (Q's), which always lowers the energy
@@ -479,11 +492,11 @@ class LocalGlobalSolver:
                 stats["restarts"] += 1
                 t = 1.0
                 d = -back_solve(g, plain=True)
-                x_new = x + d
+                x_new = kernels.step(x, 1.0, d)
                 state_new, e_new, g_new = local(x_new, hint)
             if acceleration > 0:
                 memory.push(x_new, x, g_new, g)
-            move = t * float(np.abs(d).max())
+            move = t * kernels.abs_max(d)
             x, e, g, state = x_new, e_new, g_new, state_new
             energy.append(e)
             result.iterations = it
@@ -510,6 +523,7 @@ class LocalGlobalSolver:
             stats["model_builds"] = model.factorizations - builds_before
         result.stats = stats
         result.memory = memory if acceleration > 0 else None
+        result.rotations = state.rotations
         return result
 
 
@@ -539,18 +553,24 @@ class _FloorTest:
     The floor is ``tolerance² tr(X̄ᵀ Q X̄)``, at most ``tolerance² λ ‖X̄‖²`` with
     ``λ`` :meth:`LocalGlobalSolver.stiffness_bound`; an energy above that bound
     (every real join's, by orders) is above the floor without making it (a
-    sparse product with ``Q``), and the answer is the same.
+    sparse product with ``Q``), and the answer is the same. The bound too is
+    made on the first question (a run asks only once its steps are small).
     """
 
     def __init__(self, solver: LocalGlobalSolver, X: np.ndarray, tolerance: float):
         self.solver, self.X, self.tolerance = solver, X, tolerance
         self.floor: float | None = None
-        self.bound = math.inf
-        stiffness = solver.stiffness_bound()
-        if stiffness is not None:
-            Xc = X - np.mean(X, axis=0)
-            # 1e-6: far above the rounding of either sum, so the bound stays a bound
-            self.bound = (1.0 + 1e-6) * tolerance * tolerance * stiffness * float(np.vdot(Xc, Xc))
+
+    @cached_property
+    def bound(self) -> float:
+        """An upper bound of the floor (``inf`` where ``Q``'s stiffness bound is not known)."""
+        stiffness = self.solver.stiffness_bound()
+        if stiffness is None:
+            return math.inf
+        X, tolerance = self.X, self.tolerance
+        Xc = X - np.mean(X, axis=0)
+        # 1e-6: far above the rounding of either sum, so the bound stays a bound
+        return (1.0 + 1e-6) * tolerance * tolerance * stiffness * float(np.vdot(Xc, Xc))
 
     def reached(self, e: float) -> bool:
         """The energy ``e`` is at or below the floor."""
@@ -595,7 +615,12 @@ class QuasiNewtonMemory:
 
     def copy(self) -> QuasiNewtonMemory:
         """An independent copy (its buffers copied)."""
-        return copy.deepcopy(self)
+        other = QuasiNewtonMemory.__new__(QuasiNewtonMemory)
+        other.m = self.m
+        other.S, other.Y = self.S.copy(), self.Y.copy()
+        other.rho, other.alpha = self.rho.copy(), self.alpha.copy()
+        other.order, other.unused = list(self.order), list(self.unused)
+        return other
 
     @property
     def size(self) -> int:

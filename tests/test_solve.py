@@ -561,6 +561,49 @@ def test_a_re_solve_along_a_path_starts_with_the_quasi_newton_pairs_before(patch
     assert plain.converged and solver.last_run.memory is None
 
 
+def test_a_re_solve_along_a_path_starts_its_rotation_fit_from_the_step_before(patch, monkeypatch):
+    """The second step of a path fits its first rotations from the first step's last ones,
+    turned as its start was turned; it ends where a fit from no hint ends."""
+    from igljoin.solve import LocalGlobalSolver
+
+    given, ended = [], []
+    run = LocalGlobalSolver.run
+
+    def spy(self, X0, bc, **kw):
+        given.append(kw.get("rotations"))
+        out = run(self, X0, bc, **kw)
+        ended.append(out.rotations)
+        return out
+
+    monkeypatch.setattr(LocalGlobalSolver, "run", spy)
+    solver = _solver(patch)
+    first = solver.solve()
+    T0 = first.seam_targets
+    step1 = solver.solve(_turned(T0, 1), start=first)  # from a cold result: no path yet
+    T2 = _turned(T0, 2)
+    step2 = solver.solve(T2, start=step1)
+    assert given[0] is None and given[1] is None
+    n = len(solver.corr.V)
+    assert ended[1].shape == (n, 3, 3) and given[2].shape == (n, 3, 3)
+    # the hint is the step before's last rotations, turned by the start's rigid motion
+    X0, turn = solver._warm_start(step1.guest.V, T2, solver._kept_at(step1.guest.V))
+    # (a product of 3 x 3 matrices summed in another order: rounding of unit entries)
+    assert np.allclose(given[2], np.matmul(turn, ended[1]), rtol=0.0, atol=1e-15)
+    # the same step's run without the hint: the same iterations, the same minimum to the
+    # rounding the rotation fit leaves (Newton stops at a step of 1e-7 rad, so each
+    # rotation is exact to about 1e-14; the energies agree to 1e-10 relative)
+    ls, opt = solver.solver, solver.options
+    kw = dict(
+        tolerance=opt.energy_tolerance,
+        scale=solver.guest_mean_edge,
+        acceleration=opt.acceleration,
+        memory=solver._kept[-2].memory,
+    )
+    plain = run(ls, X0, T2, **kw)
+    assert plain.iterations == step2.iterations
+    assert abs(plain.energy[-1] - step2.energy[-1]) <= 1e-10 * plain.energy[-1]
+
+
 def test_pairs_larger_than_the_limit_are_not_kept(patch, monkeypatch):
     """Above ``PAIRS_MAX_BYTES`` a path's re-solves start without pairs (and hold none)."""
     join_module = importlib.import_module("igljoin.join")  # igljoin.join is the function
@@ -701,6 +744,44 @@ def test_dot_kernel_is_the_dot_product():
         ref = float(np.dot(a.reshape(-1), b.reshape(-1)))
         # partial sums in another order: rounding of a sum of 3n products of size ~1
         assert kernels.dot(a, b) == pytest.approx(ref, rel=1e-12, abs=1e-12 * np.sqrt(3 * n + 1))
+
+
+def test_row_and_step_kernels_are_their_numpy_expressions():
+    """The iteration's compiled scatter, step and largest move: numpy's floats, to the bit."""
+    from igljoin import kernels
+
+    rng = np.random.default_rng(2)
+    n = 1001
+    rows = rng.permutation(n)
+    free, fixed = np.sort(rows[:900]), np.sort(rows[900:])
+    x, bc = rng.normal(size=(900, 3)), rng.normal(size=(101, 3))
+    X = np.empty((n, 3))
+    X[free], X[fixed] = x, bc
+    assert np.array_equal(kernels.join_rows(n, free, x, fixed, bc), X)
+    d = rng.normal(size=(900, 3))
+    for t in (1.0, 0.5, 0.1234567):
+        assert np.array_equal(kernels.step(x, t, d), x + t * d)
+    assert kernels.abs_max(d) == np.abs(d).max()
+    d[5, 1] = np.nan
+    assert np.isnan(kernels.abs_max(d)) and np.isnan(np.abs(d).max())
+
+
+def test_a_quasi_newton_memory_copy_is_independent():
+    from igljoin.solve import QuasiNewtonMemory
+
+    rng = np.random.default_rng(3)
+    shape = (50, 3)
+    memory = QuasiNewtonMemory(2, shape)
+    x, g, s = (rng.normal(size=shape) for _ in range(3))
+    memory.push(x + s, x, g + s, g)
+    other = memory.copy()
+    assert other.size == memory.size == 1 and other.m == memory.m
+    g2 = rng.normal(size=shape)
+    assert np.array_equal(other.apply(g2, lambda v: v), memory.apply(g2, lambda v: v))
+    other.push(x + 2 * s, x, g + 3 * s, g)
+    other.clear()
+    assert memory.size == 1 and other.size == 0
+    assert memory.S is not other.S and memory.order is not other.order
 
 
 # -- a refused change leaves the solver as it was --------------------------------------------
