@@ -24,6 +24,7 @@ __all__ = [
     "half_edges",
     "orientable",
     "repeated_directed_edges",
+    "repeated_directed_pairs",
     "repeated_rows",
     "row_counts",
     "runs",
@@ -280,6 +281,28 @@ def repeated_directed_edges(F: np.ndarray, n: int | None = None) -> int:
     n = int(F.max()) + 1 if n is None else int(n)
     directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
     return int((row_counts(directed, n) > 1).sum())
+
+
+def repeated_directed_pairs(half) -> int:
+    """:func:`repeated_directed_edges` of a surface whose edges have at most two face sides.
+
+    Read from its half-edges sorted by undirected edge (``half_edges(F, n)``):
+    where no undirected edge has more than two sides and no face repeats a
+    vertex, a directed edge is traversed twice exactly where the two sides
+    of an edge start at the same vertex; no second sort is needed.
+
+    Parameters
+    ----------
+    half : tuple
+        ``half_edges(F, n)``.
+
+    Returns
+    -------
+    int
+    """
+    src, _, order, skey = half
+    run = np.flatnonzero(skey[1:] == skey[:-1])
+    return int(np.count_nonzero(src[order[run]] == src[order[run + 1]]))
 
 
 def orientable(F: np.ndarray) -> bool:

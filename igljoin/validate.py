@@ -168,7 +168,8 @@ def check_surface(mesh: Mesh, role: str) -> None:
             f"{role}: {len(bad)} edges are shared by more than two faces (non-manifold; first "
             f"{bad[:3].tolist()}); {fix}"
         )
-    dcount = topology.repeated_directed_edges(F, n)
+    # every edge has at most two sides and no face repeats a vertex (both checked above)
+    dcount = topology.repeated_directed_pairs(half)
     if dcount:
         if not topology.orientable(F):
             raise MeshError(

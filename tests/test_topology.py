@@ -81,6 +81,26 @@ def test_repeated_directed_edges_and_orientability():
     assert not topology.orientable(mobius)
 
 
+def test_repeated_directed_pairs_count_what_the_sort_of_directed_edges_counts():
+    # on surfaces whose edges have at most two sides: a grid with random faces turned over
+    # (each turned face runs its interior sides as a neighbour does, unless that one is
+    # turned too), and the tetrahedron
+    assert topology.repeated_directed_pairs(topology.half_edges(TET, 4)) == 0
+    x, y = np.meshgrid(np.arange(9), np.arange(7), indexing="ij")
+    a = (x[:-1, :-1] * 7 + y[:-1, :-1]).ravel()
+    F = np.concatenate([np.stack([a, a + 7, a + 8], 1), np.stack([a, a + 8, a + 1], 1)])
+    rng = np.random.default_rng(2)
+    counts = set()
+    for share in (0.0, 0.1, 0.5, 1.0):
+        G = F.copy()
+        turn = rng.uniform(size=len(G)) < share
+        G[turn] = G[turn, ::-1]
+        want = topology.repeated_directed_edges(G, 63)
+        assert topology.repeated_directed_pairs(topology.half_edges(G, 63)) == want
+        counts.add(want)
+    assert 0 in counts and len(counts) >= 3  # none, some and many repeated
+
+
 def test_shared_and_repeated_rows():
     P = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [-0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
     np.testing.assert_array_equal(topology.shared_rows(P), [True, False, True, True])
