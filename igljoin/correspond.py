@@ -673,12 +673,7 @@ def split_boundary_faces(F, a, b, frac, n0):
     if a.size == 0:
         return F.copy(), parent
     n = int(max(F.max(), a.max(), b.max())) + 1
-    # directed edges of all faces: edge e of face f goes F[f, e] -> F[f, (e + 1) % 3]
-    src = F.reshape(-1)
-    dst = F[:, [1, 2, 0]].reshape(-1)
-    key = src * n + dst
-    order = np.argsort(key)
-    skey = key[order]
+    order, skey = _directed_edges_at(F, a, b, n)
 
     def find(u, v):
         q = u * n + v
@@ -706,6 +701,31 @@ def split_boundary_faces(F, a, b, frac, n0):
     keep = np.ones(m, dtype=bool)
     keep[touched] = False
     return np.vstack([F[keep], new_F]), np.concatenate([parent[keep], new_parent])
+
+
+def _directed_edges_at(F, a, b, n):
+    """The half-edges of ``F`` (m, 3) sorted by ``start * n + end``, as the split searches them.
+
+    Returns ``order`` (each one's half-edge ``3 f + e``, running ``F[f, e] ->
+    F[f, (e + 1) % 3]``) and ``skey`` (their keys, ascending). Only the faces
+    with two corners among the split edges' ends ``a``, ``b`` (k,) can hold a
+    split half-edge, so only theirs are sorted; where there are none, or two
+    of them run the same way, every face's half-edges are (the order among
+    equal keys is then the sort's of all of them, as before).
+    """
+    on = np.zeros(n, dtype=bool)
+    on[a] = True
+    on[b] = True
+    near = np.flatnonzero(on[F].sum(axis=1) >= 2)
+    G = F[near]
+    key = G.reshape(-1) * n + G[:, [1, 2, 0]].reshape(-1)
+    order = np.argsort(key)
+    skey = key[order]
+    if near.size and not (skey[1:] == skey[:-1]).any():
+        return 3 * near[order // 3] + order % 3, skey
+    key = F.reshape(-1) * n + F[:, [1, 2, 0]].reshape(-1)
+    order = np.argsort(key)
+    return order, key[order]
 
 
 def _fans_of_single_splits(F, grp, he_sorted, starts, stops, n0):

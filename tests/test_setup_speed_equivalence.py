@@ -746,6 +746,47 @@ def test_fans_of_single_splits_random_strips():
     assert declined == 0  # strip faces have one boundary edge each
 
 
+def _all_directed_edges(F, n):
+    """Every face's half-edges sorted by ``start * n + end`` (the sort the split made before)."""
+    key = F.reshape(-1) * n + F[:, [1, 2, 0]].reshape(-1)
+    order = np.argsort(key)
+    return order, key[order]
+
+
+def _found(order, skey, q):
+    pos = np.clip(np.searchsorted(skey, q), 0, len(skey) - 1)
+    return np.where(skey[pos] == q, order[pos], -1)
+
+
+def test_the_split_finds_its_half_edges_among_the_faces_at_the_curve():
+    # the half-edges found for the split edges (either way round) are those the sort of
+    # every face's half-edges finds: on relabelled grids with random boundary edges, and
+    # where a face at the curve is turned over (two half-edges there run the same way, so
+    # every face's are sorted, the split's sort of before)
+    rng = np.random.default_rng(13)
+    V, F = _grid(10, 3)
+    bottom = np.arange(11)
+    for turn in (False, True):
+        for _ in range(50):
+            perm = rng.permutation(len(V))
+            G = perm[F][rng.permutation(len(F))]
+            edge = rng.integers(0, 10, size=int(rng.integers(1, 8)))
+            a, b = perm[bottom[edge]], perm[bottom[edge + 1]]
+            a = np.append(a, perm[20])  # an edge in no face: found nowhere
+            b = np.append(b, perm[5])
+            if turn:
+                # the face (0, 1, 12) turned: its side 0 -> 12 runs as its neighbour's
+                f = np.flatnonzero(np.isin(G, perm[[0, 1, 12]]).all(axis=1))[0]
+                G[f] = G[f, ::-1]
+                a, b = np.append(a, perm[0]), np.append(b, perm[12])
+            n = len(V)
+            got, want = corr._directed_edges_at(G, a, b, n), _all_directed_edges(G, n)
+            assert (len(got[0]) == 3 * len(G)) == turn  # all faces' sorted only then
+            for q in (a * n + b, b * n + a):
+                np.testing.assert_array_equal(_found(*got, q), _found(*want, q))
+            assert (_found(*got, a * n + b) >= 0).any() or (_found(*got, b * n + a) >= 0).any()
+
+
 def test_split_boundary_faces_on_a_face_split_twice():
     # the fallback still serves faces with two split edges
     V, F = _grid(2, 1)
