@@ -781,7 +781,11 @@ def test_a_quasi_newton_memory_copy_is_independent():
     other.push(x + 2 * s, x, g + 3 * s, g)
     other.clear()
     assert memory.size == 1 and other.size == 0
-    assert memory.S is not other.S and memory.order is not other.order
+    # every attribute copied, none shared (a field added later is copied too)
+    assert vars(other).keys() == vars(memory).keys()
+    for key, value in vars(memory).items():
+        if isinstance(value, (np.ndarray, list)):
+            assert vars(other)[key] is not value, key
 
 
 # -- a refused change leaves the solver as it was --------------------------------------------
