@@ -156,6 +156,31 @@ def test_coarse_matrix_is_the_projected_model(patch):
     assert sp.issparse(model.A) and model.factorizations == 1
 
 
+def test_the_additive_solve_adds_the_coarse_thread_to_the_fine_back_solve(patch):
+    ls = patch.solver
+    state, _, _ = ls.local(patch.initial_guess())
+    model = twolevel.TwoLevelModel(ls, bending=True)
+    model.refresh(state, 1)
+    v = np.random.default_rng(5).standard_normal((len(ls.free), 3))
+    # the coarse solve made on its own thread: the same floats as one after the other
+    expected = ls.factor.solve_free(v) + model._coarse(v.reshape(-1)).reshape(v.shape)
+    np.testing.assert_array_equal(model.solve_free(v), expected)
+
+
+def test_an_error_in_the_coarse_thread_is_raised_in_the_caller(patch, monkeypatch):
+    ls = patch.solver
+    state, _, _ = ls.local(patch.initial_guess())
+    model = twolevel.TwoLevelModel(ls)
+    model.refresh(state, 1)
+
+    def broken(v):
+        raise FloatingPointError("coarse solve failed")
+
+    monkeypatch.setattr(model, "_coarse", broken)
+    with pytest.raises(FloatingPointError, match="coarse solve failed"):
+        model.solve_free(np.ones((len(ls.free), 3)))
+
+
 @pytest.mark.parametrize("scenario", ["partial_patch", "end_to_end"])
 @pytest.mark.parametrize("balancing", [False, True])
 def test_same_minimum_as_a_long_plain_run(scenario, balancing):
