@@ -65,12 +65,24 @@ __all__ = [
     "AUTO_MODEL",
     "MAX_MODEL_ENTRIES",
     "AUTO_MAX_MODEL_ENTRIES",
+    "SPANNED_BENDING",
 ]
 
 # relative ridge added to the coarse matrix: a cluster of three nearly collinear vertices
 # has a nearly free rotation about their line; 1e-10 of the mean diagonal keeps its
 # factorization finite without changing any other coarse mode measurably
 _RIDGE = 1e-10
+
+#: Bending motions of a cluster whose part outside its rigid motions' span is below this
+#: fraction of their size (the smallest eigenvalue of the Schur complement of the rigid
+#: block in the cluster's Gram matrix over the bending block's trace) are left out of the
+#: coarse space. A flat cluster of fewer than six vertices has too few normal
+#: displacements for three bending motions beside the tilts: on a 30k-vertex patch three
+#: clusters of three vertices have ratios of 1e-15 to 1e-20 (spanned to rounding) and their
+#: coarse system's pivots were perturbed (7), which made "auto" give its model up. The next
+#: smallest measured: 7.8e-8 (30k patch, five vertices) and 2.3e-7 (100k, five vertices),
+#: which factor soundly; 1e-10 lies between rounding and them.
+SPANNED_BENDING = 1e-10
 
 #: Largest number of entries the model may hold (:attr:`TwoLevelModel.model_entries`: the
 #: coarse system, :attr:`TwoLevelModel.coarse_entries`, the operators' cluster patterns and
@@ -332,6 +344,40 @@ def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
     return _cluster_columns(_bending_blocks(X, labels), labels, a)
 
 
+def _spanned_bending(blocks: np.ndarray, labels: np.ndarray, a: int) -> np.ndarray:
+    """The clusters whose bending motions their rigid motions nearly span (ascending).
+
+    Per cluster, the Gram matrix ``G`` (9, 9) of its motions' columns
+    (``blocks``, shape (m, 3, 9): six rigid, then three bending); the part
+    of the bending columns outside the rigid span is the Schur complement
+    ``G_bb − G_br G_rr⁻¹ G_rb`` (3, 3). A cluster is returned when its
+    smallest eigenvalue is at most :data:`SPANNED_BENDING` times
+    ``trace(G_bb)``.
+
+    Parameters
+    ----------
+    blocks : ndarray, shape (m, 3, 9)
+    labels : ndarray of int64, shape (m,)
+    a : int
+        Number of clusters.
+
+    Returns
+    -------
+    ndarray of int64, shape (k,)
+    """
+    G = ck.cluster_gram(np.ascontiguousarray(blocks), labels, a)
+    rigid, cross, bend = G[:, :6, :6], G[:, :6, 6:], G[:, 6:, 6:]
+    # the rigid block is definite but for clusters of one or two vertices (turns about
+    # their line move nothing, and their columns and cross terms are zero): a ridge far
+    # below the test's threshold keeps the solve finite without changing its answer
+    ridge = 1e-14 * np.trace(rigid, axis1=1, axis2=2) + 1e-300
+    rigid = rigid + ridge[:, None, None] * np.eye(6)
+    schur = bend - np.einsum("aij,aik->ajk", cross, np.linalg.solve(rigid, cross))
+    smallest = np.linalg.eigvalsh(schur)[:, 0]
+    size = np.trace(bend, axis1=1, axis2=2)
+    return np.flatnonzero(smallest <= SPANNED_BENDING * size).astype(np.int64)
+
+
 def _bending_blocks(X: np.ndarray, labels: np.ndarray) -> np.ndarray:
     """Every vertex's three bending rows (m, 3, 3) of :func:`bending_prolongation`."""
     a, count, r, radius = _about_centroids(X, labels)
@@ -471,6 +517,12 @@ class TwoLevelModel:
     motions : ndarray, shape (n_free, 3, w), or None
         Every free vertex's rows of ``A`` (:attr:`A` assembles them), ``w``
         = 6, or 9 with ``bending``.
+    left_out : ndarray of int64
+        Coarse unknowns of the latest build whose motions are left out (zero
+        columns of ``A``, their coarse unknown apart with a diagonal of
+        ``A_c``'s mean size): the bending motions of clusters whose rigid
+        motions nearly span them (:data:`SPANNED_BENDING`; a flat cluster of
+        fewer than six vertices).
     factors : list or None
         The balancing form's :func:`igljoin.newton.gauss_newton_factors`.
     fallback : str or None
@@ -505,6 +557,7 @@ class TwoLevelModel:
         self.built_at = []
         self.free_dofs = dofs(solver.free)
         self.labels = None
+        self.left_out = np.zeros(0, dtype=np.int64)
         self._cache = {}
         # set at the first build: the free vertices' clusters by vertex (-1 fixed) and their
         # rows in the motions, per term its operators' cluster patterns and whether it is
@@ -610,8 +663,15 @@ class TwoLevelModel:
         # build's peak (a 1M tube's coarse factorization holds ~5 GB)
         self.coarse_factor = self.factors = None
         blocks = _rigid_blocks(X, self.labels)
+        self.left_out = np.zeros(0, dtype=np.int64)
         if self.bending:
             blocks = np.concatenate([blocks, _bending_blocks(X, self.labels)], axis=2)
+            spanned = _spanned_bending(blocks, self.labels, self._clusters)
+            if spanned.size:
+                # their columns zero: A_c's rows for them are zero but for the diagonal
+                # _project gives them, and the coarse solve leaves them at zero
+                blocks[np.isin(self.labels, spanned), :, 6:] = 0.0
+                self.left_out = (9 * spanned[:, None] + np.arange(6, 9)).ravel()
         self.motions = np.ascontiguousarray(blocks)
         del blocks
         model = 0.0
@@ -833,7 +893,13 @@ class TwoLevelModel:
                 U.data**2 * np.repeat(weights, np.diff(U.indptr)),
                 minlength=w * a,
             )
-        Ac.setdiag(Ac.diagonal() + _RIDGE * diagonal.mean())
+        ridge = _RIDGE * diagonal.mean()
+        if self.left_out.size:
+            # a left-out motion's unknown stands alone: a diagonal of A_c's mean size keeps
+            # its pivot sound (its right-hand side, and so its value, is always zero)
+            ridge = np.full(len(diagonal), ridge)
+            ridge[self.left_out] = diagonal.mean()
+        Ac.setdiag(Ac.diagonal() + ridge)
         return (Ac, U, weights), seconds
 
     @property
