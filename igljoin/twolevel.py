@@ -73,16 +73,24 @@ __all__ = [
 # factorization finite without changing any other coarse mode measurably
 _RIDGE = 1e-10
 
-#: Bending motions of a cluster whose part outside its rigid motions' span is below this
-#: fraction of their size (the smallest eigenvalue of the Schur complement of the rigid
-#: block in the cluster's Gram matrix over the bending block's trace) are left out of the
-#: coarse space. A flat cluster of fewer than six vertices has too few normal
-#: displacements for three bending motions beside the tilts: on a 30k-vertex patch three
-#: clusters of three vertices have ratios of 1e-15 to 1e-20 (spanned to rounding) and their
-#: coarse system's pivots were perturbed (7), which made "auto" give its model up. The next
-#: smallest measured: 7.8e-8 (30k patch, five vertices) and 2.3e-7 (100k, five vertices),
-#: which factor soundly; 1e-10 lies between rounding and them.
-SPANNED_BENDING = 1e-10
+#: The bending motions of a cluster of fewer than six vertices whose part outside its
+#: rigid motions' span is at most this fraction of their size (the smallest eigenvalue of
+#: the Schur complement of the rigid block in the cluster's Gram matrix over the bending
+#: block's trace) are left out of the coarse space. A flat cluster of fewer than six
+#: vertices has too few normal displacements for three bending motions beside the tilts:
+#: on a 30k-vertex patch three clusters of three vertices have ratios of 6e-15 and less
+#: (spanned to rounding) and their coarse system's pivots were perturbed (7), which made
+#: "auto" give its model up. The smallest others measured, in models that factor soundly:
+#: 7.8e-8 (30k patch, five vertices), 2.3e-7 (100k patch), 2.0e-5 (20k patch); larger
+#: clusters along a tube's ring have one bending motion nearly rigid (1.9e-14 on the 20k
+#: tube, ten vertices; 1.6e-13 on the 100k tube, twenty; 7.3e-11 on the 40k tube) and the
+#: other two not: they keep all three, as before (leaving out only the spanned direction
+#: was not tried).
+SPANNED_BENDING = 1e-12
+
+# fewer vertices than this leave a flat cluster's bending motions spanned (three rigid and
+# three bending normal displacements)
+_BENDING_VERTICES = 6
 
 #: Largest number of entries the model may hold (:attr:`TwoLevelModel.model_entries`: the
 #: coarse system, :attr:`TwoLevelModel.coarse_entries`, the operators' cluster patterns and
@@ -350,9 +358,9 @@ def _spanned_bending(blocks: np.ndarray, labels: np.ndarray, a: int) -> np.ndarr
     Per cluster, the Gram matrix ``G`` (9, 9) of its motions' columns
     (``blocks``, shape (m, 3, 9): six rigid, then three bending); the part
     of the bending columns outside the rigid span is the Schur complement
-    ``G_bb − G_br G_rr⁻¹ G_rb`` (3, 3). A cluster is returned when its
-    smallest eigenvalue is at most :data:`SPANNED_BENDING` times
-    ``trace(G_bb)``.
+    ``G_bb − G_br G_rr⁻¹ G_rb`` (3, 3). A cluster of fewer than six
+    vertices is returned when its smallest eigenvalue is at most
+    :data:`SPANNED_BENDING` times ``trace(G_bb)``.
 
     Parameters
     ----------
@@ -375,7 +383,8 @@ def _spanned_bending(blocks: np.ndarray, labels: np.ndarray, a: int) -> np.ndarr
     schur = bend - np.einsum("aij,aik->ajk", cross, np.linalg.solve(rigid, cross))
     smallest = np.linalg.eigvalsh(schur)[:, 0]
     size = np.trace(bend, axis1=1, axis2=2)
-    return np.flatnonzero(smallest <= SPANNED_BENDING * size).astype(np.int64)
+    few = np.bincount(labels, minlength=a) < _BENDING_VERTICES
+    return np.flatnonzero(few & (smallest <= SPANNED_BENDING * size)).astype(np.int64)
 
 
 def _bending_blocks(X: np.ndarray, labels: np.ndarray) -> np.ndarray:
@@ -520,9 +529,9 @@ class TwoLevelModel:
     left_out : ndarray of int64
         Coarse unknowns of the latest build whose motions are left out (zero
         columns of ``A``, their coarse unknown apart with a diagonal of
-        ``A_c``'s mean size): the bending motions of clusters whose rigid
-        motions nearly span them (:data:`SPANNED_BENDING`; a flat cluster of
-        fewer than six vertices).
+        ``A_c``'s mean size): the bending motions of clusters of fewer than
+        six vertices whose rigid motions span them to rounding
+        (:data:`SPANNED_BENDING`).
     factors : list or None
         The balancing form's :func:`igljoin.newton.gauss_newton_factors`.
     fallback : str or None
@@ -823,6 +832,12 @@ class TwoLevelModel:
         else the solver's backend. Pardiso's numeric phase alone on the first
         build's analysis (0.17 s at 40k) crashed inside MKL on a rebuild of a
         100k tube's coarse matrix, so every build is a whole factorization.
+        The crash is MKL's after a back-solve on fewer threads than the
+        factorization's (as every back-solve here is made, on one): the
+        numeric phase then ends in a segmentation fault on the augmented
+        systems too (reproduced on the 30k patch's fine system and the 100k
+        patch's coarse one), and not after back-solves on the factorization's
+        threads.
         """
         ls = self.solver
         if U is not None:

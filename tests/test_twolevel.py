@@ -182,6 +182,15 @@ def test_bending_motions_the_rigid_ones_span_are_found():
         # a flat cluster's normal displacements: `count` of them, three of them rigid (the
         # translation and two tilts), so three bending motions need six vertices
         assert twolevel._spanned_bending(blocks, labels, 1).size == spanned, count
+    # six or more vertices are never left out, even with every bending motion spanned (a
+    # cluster on a line: no bending normal to it)
+    X = np.zeros((8, 3))
+    X[:, 0] = np.linspace(0.0, 1.0, 8)
+    labels = np.zeros(8, dtype=np.int64)
+    blocks = np.concatenate(
+        [twolevel._rigid_blocks(X, labels), twolevel._bending_blocks(X, labels)], axis=2
+    )
+    assert twolevel._spanned_bending(blocks, labels, 1).size == 0
     # one or two vertices: no turn about their line, the test still answers
     for count in (1, 2):
         X, labels = _flat_cluster(rng, count)
