@@ -280,7 +280,7 @@ class JoinOptions:
         :data:`igljoin.twolevel.MAX_MODEL_ENTRIES`. The additive coarse
         correction is solved on a second thread while the fine back-solve
         runs (the same result; on two free cores the 100k patch's
-        back-solves take 0.8× the time).
+        back-solves take 0.7× the time).
     linear_solver : {"auto", "igl", "cholespy", "pardiso"}
         Sparse Cholesky backend of the global step: libigl's
         ``min_quad_with_fixed`` (always available), cholespy (the
