@@ -11,8 +11,7 @@ only, not on the positions: :func:`row_clusters` (on the operators) and
 :func:`block_pattern` find them once, and :func:`project_rows` and
 :func:`project_rotation` recompute the values of ``A_c``'s (w, w) blocks at
 a rebuild, one pass over the operators' rows without forming ``J``.
-:func:`edge_lengths` weighs the graph the clusters are grown on;
-:func:`cluster_gram` gives every cluster's Gram matrix of its motions.
+:func:`edge_lengths` weighs the graph the clusters are grown on.
 :func:`restrict` and :func:`prolong` apply ``Aᵀ`` and ``A`` from the blocks,
 without holding the GIL (the additive form runs them, with the coarse solve,
 on a thread beside the fine back-solve).
@@ -31,7 +30,6 @@ __all__ = [
     "project_rotation",
     "motion_rows_of",
     "rotation_factor",
-    "cluster_gram",
     "restrict",
     "prolong",
 ]
@@ -505,35 +503,6 @@ def motion_rows_of(indptr, indices, data, directions, ptr, slot, where, B):
                             out[at + w * s + k] += x * B[v, c, k]
             at += w * q
     return out
-
-
-@nb.njit(cache=True)
-def cluster_gram(B, labels, a):
-    """Every cluster's Gram matrix of its motions, ``Σ_v B_vᵀ B_v`` over its vertices.
-
-    Parameters
-    ----------
-    B : ndarray, shape (m, 3, w)
-        Every free vertex's motions.
-    labels : ndarray of int64, shape (m,)
-    a : int
-        Number of clusters.
-
-    Returns
-    -------
-    ndarray, shape (a, w, w)
-    """
-    w = B.shape[2]
-    G = np.zeros((a, w, w))
-    for i in range(B.shape[0]):
-        g = G[labels[i]]
-        for c in range(3):
-            for k in range(w):
-                x = B[i, c, k]
-                if x != 0.0:
-                    for j in range(w):
-                        g[k, j] += x * B[i, c, j]
-    return G
 
 
 @nb.njit(cache=True, nogil=True)  # runs beside the fine back-solve (twolevel.solve_free)
