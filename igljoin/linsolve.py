@@ -16,7 +16,10 @@ back-substitution. Three backends give the same answer (to rounding):
   ``libmkl_rt`` (the ``igljoin[pardiso]`` extra; Intel Simplified Software
   License: free to use and redistribute, binary only). The factorization
   runs on MKL's threads (``MKL_NUM_THREADS``), each back-solve on one
-  (two were no faster at any size measured).
+  (two were no faster under load; on a quiet machine the 100k patch's
+  augmented 3-column back-solve took 49 against 60 ms with two, while on one
+  the two-level model's coarse solve runs beside it on the other core:
+  :meth:`igljoin.twolevel.TwoLevelModel.solve_free`).
 
 ``"auto"`` picks Pardiso for systems of :data:`PARDISO_FROM_NNZ` (10
 million) stored nonzeros and more and cholespy below, each when it is
@@ -407,7 +410,7 @@ class _Pardiso:
         k = b.shape[1]
         bt = np.ascontiguousarray(b.T)  # column after column, as Pardiso reads them
         xt = np.empty_like(bt)
-        # the back-solve on one thread: two were no faster at any size measured (module doc)
+        # the back-solve on one thread (module doc)
         before = self.lib.MKL_Set_Num_Threads_Local(ctypes.c_int(1))
         try:
             _pardiso_call(
