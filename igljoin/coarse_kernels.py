@@ -12,7 +12,9 @@ only, not on the positions: :func:`row_clusters` (on the operators) and
 :func:`project_rotation` recompute the values of ``A_c``'s (w, w) blocks at
 a rebuild, one pass over the operators' rows without forming ``J``.
 :func:`edge_lengths` weighs the graph the clusters are grown on.
-:func:`restrict` and :func:`prolong` apply ``Aᵀ`` and ``A`` from the blocks.
+:func:`restrict` and :func:`prolong` apply ``Aᵀ`` and ``A`` from the blocks,
+without holding the GIL (the additive form runs them, with the coarse solve,
+on a thread beside the fine back-solve).
 """
 
 from __future__ import annotations
@@ -503,7 +505,7 @@ def motion_rows_of(indptr, indices, data, directions, ptr, slot, where, B):
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)  # runs beside the fine back-solve (twolevel.solve_free)
 def restrict(B, labels, v, a):
     """``Aᵀ v`` for the motions ``B`` (m, 3, w) of clusters ``labels`` (m,), ``v`` (3 m,).
 
@@ -522,7 +524,7 @@ def restrict(B, labels, v, a):
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def prolong(B, labels, y):
     """``A y`` for the motions ``B`` (m, 3, w) of clusters ``labels`` (m,), ``y`` (w a,).
 

@@ -16,7 +16,10 @@ back-substitution. Three backends give the same answer (to rounding):
   ``libmkl_rt`` (the ``igljoin[pardiso]`` extra; Intel Simplified Software
   License: free to use and redistribute, binary only). The factorization
   runs on MKL's threads (``MKL_NUM_THREADS``), each back-solve on one
-  (two were no faster at any size measured).
+  (two were no faster under load; on a quiet machine the 100k patch's
+  augmented 3-column back-solve took 49 against 60 ms with two, while on one
+  the two-level model's coarse solve runs beside it on the other core:
+  :meth:`igljoin.twolevel.TwoLevelModel.solve_free`).
 
 ``"auto"`` picks Pardiso for systems of :data:`PARDISO_FROM_NNZ` (10
 million) stored nonzeros and more and cholespy below, each when it is
@@ -104,6 +107,7 @@ __all__ = [
     "PARDISO_FROM_NNZ",
     "AugmentedQuadratic",
     "FixedQuadratic",
+    "augmented_upper",
     "available_backends",
     "resolve_backend",
 ]
@@ -266,13 +270,102 @@ def _pardiso_release(lib, itype, pt, iparm, n, mtype=2) -> None:
         pass
 
 
+def _upper(A: sp.spmatrix) -> sp.csr_matrix:
+    """The upper triangle of the symmetric ``A`` (m, m) as Pardiso reads it: CSR, sorted
+    columns, every diagonal entry stored (zero where ``A`` has none: a missing one is an
+    error) and duplicates summed."""
+    T = sp.triu(sp.coo_matrix(A), format="coo")
+    d = np.arange(A.shape[0])
+    U = sp.coo_matrix(
+        (np.r_[T.data, np.zeros(d.size)], (np.r_[T.row, d], np.r_[T.col, d])), shape=A.shape
+    ).tocsr()
+    U.sort_indices()
+    return U
+
+
+def _is_upper(A: sp.spmatrix) -> bool:
+    """Whether ``A`` is already :func:`_upper`'s form: CSR, sorted and without duplicates,
+    every row starting with its diagonal entry (so nothing lies below it)."""
+    if not sp.isspmatrix_csr(A) or not A.has_canonical_format:
+        return False
+    m = A.shape[0]
+    if A.shape != (m, m) or not np.all(np.diff(A.indptr) > 0):
+        return False
+    return bool(np.array_equal(A.indices[A.indptr[:-1]], np.arange(m)))
+
+
+def _canonical(A: sp.csr_matrix) -> sp.csr_matrix:
+    """``A`` itself when its columns are sorted without duplicates, else a canonical copy."""
+    if A.has_canonical_format:
+        return A
+    A = A.copy()
+    A.sum_duplicates()
+    return A
+
+
+def augmented_upper(S: sp.csr_matrix, Kt: sp.csr_matrix, d: np.ndarray) -> sp.csr_matrix:
+    """The upper triangle of ``[[S, Kt], [Ktᵀ, diag(d)]]`` in :func:`_upper`'s form.
+
+    Placed directly instead of assembling the whole matrix and cutting it:
+    row ``i < m`` holds ``S``'s entries from its diagonal on, then ``Kt``'s
+    row ``i`` (columns ``m + j``); row ``m + j`` holds ``d[j]``. The same
+    arrays as :func:`_upper` of the assembled matrix when every diagonal
+    entry of ``S`` is stored (:func:`_is_upper` is then true of the result;
+    :class:`_Pardiso` converts it otherwise); at 100k guest vertices
+    0.1 s against 0.6 s.
+
+    Parameters
+    ----------
+    S : scipy.sparse.csr_matrix, shape (m, m)
+        Symmetric.
+    Kt : scipy.sparse.csr_matrix, shape (m, r)
+    d : ndarray, shape (r,)
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (m + r, m + r)
+    """
+    S, Kt = _canonical(S), _canonical(Kt)
+    m, r = S.shape[0], len(d)
+    rows = np.repeat(np.arange(m), np.diff(S.indptr))
+    keep = S.indices >= rows
+    s_rows = rows[keep]
+    del rows
+    s_count = np.bincount(s_rows, minlength=m)
+    k_count = np.diff(Kt.indptr)
+    indptr = np.zeros(m + r + 1, dtype=np.int64)
+    np.cumsum(np.r_[s_count + k_count, np.ones(r, dtype=np.int64)], out=indptr[1:])
+    data = np.empty(indptr[-1])
+    indices = np.empty(indptr[-1], dtype=np.int64)
+    # S's kept entries first in their row, in their order
+    first = np.cumsum(s_count) - s_count
+    at = indptr[s_rows] + np.arange(len(s_rows)) - first[s_rows]
+    data[at] = S.data[keep]
+    indices[at] = S.indices[keep]
+    del at, s_rows, keep, first
+    # then Kt's row, its columns past S's
+    k_rows = np.repeat(np.arange(m), k_count)
+    at = indptr[k_rows] + s_count[k_rows] + np.arange(Kt.nnz) - Kt.indptr[k_rows]
+    data[at] = Kt.data
+    indices[at] = m + Kt.indices
+    del at, k_rows
+    data[indptr[m:-1]] = d
+    indices[indptr[m:-1]] = m + np.arange(r)
+    U = sp.csr_matrix((data, indices, indptr), shape=(m + r, m + r))
+    U.has_sorted_indices = True
+    return U
+
+
 class _Pardiso:
     """Supernodal factorization of a symmetric matrix with MKL Pardiso (METIS ordering).
 
     Parameters
     ----------
     A : sparse matrix, shape (m, m)
-        Symmetric; only its upper triangle is read.
+        Symmetric; only its upper triangle is read. A CSR matrix that is
+        already that triangle as Pardiso reads it (sorted columns, every row
+        starting at its stored diagonal: :func:`augmented_upper`'s) is
+        passed on without a copy.
     indefinite : bool
         ``False``: positive definite, a Cholesky factorization (Pardiso's
         ``mtype=2``). ``True``: indefinite, an LDLᵀ factorization with
@@ -292,13 +385,7 @@ class _Pardiso:
     def __init__(self, A: sp.spmatrix, indefinite: bool = False):
         self.lib, self.itype = _mkl_rt()
         self.mtype = -2 if indefinite else 2
-        T = sp.triu(sp.coo_matrix(A), format="coo")
-        d = np.arange(A.shape[0])
-        # Pardiso needs every diagonal entry stored, zero or not (a missing one is an error)
-        U = sp.coo_matrix(
-            (np.r_[T.data, np.zeros(d.size)], (np.r_[T.row, d], np.r_[T.col, d])), shape=A.shape
-        ).tocsr()
-        U.sort_indices()
+        U = A if _is_upper(A) else _upper(A)
         self.n = U.shape[0]
         self.a = np.ascontiguousarray(U.data, dtype=np.float64)
         self.ia = np.ascontiguousarray(U.indptr, dtype=self.itype)
@@ -323,7 +410,7 @@ class _Pardiso:
         k = b.shape[1]
         bt = np.ascontiguousarray(b.T)  # column after column, as Pardiso reads them
         xt = np.empty_like(bt)
-        # the back-solve on one thread: two were no faster at any size measured (module doc)
+        # the back-solve on one thread (module doc)
         before = self.lib.MKL_Set_Num_Threads_Local(ctypes.c_int(1))
         try:
             _pardiso_call(
@@ -556,8 +643,7 @@ class AugmentedQuadratic(_FixedRows):
         if not self.free.size:
             return
         FixedQuadratic.made += 1
-        A = sp.bmat([[self.Sff, self.Kft], [self.Kf, sp.diags(-1.0 / self.cw)]], format="csr")
-        self._factor_augmented(A)
+        self._factor_augmented(augmented_upper(self.Sff, self.Kft, -1.0 / self.cw))
 
     def _factor_augmented(self, A: sp.spmatrix) -> None:
         """Factor the augmented matrix ``A`` with Pardiso's LDLᵀ and check it by a probe solve.
@@ -570,7 +656,9 @@ class AugmentedQuadratic(_FixedRows):
         Parameters
         ----------
         A : sparse matrix, shape (n_free + r, n_free + r)
-            ``[[S_ff, K_fᵀ], [K_f, −(c W)⁻¹]]``; only its upper triangle is read.
+            ``[[S_ff, K_fᵀ], [K_f, −(c W)⁻¹]]``; only its upper triangle is read
+            (the triangle alone, :func:`augmented_upper`'s, is factored
+            without a copy).
         """
         try:
             self._pardiso = _Pardiso(A, indefinite=True)

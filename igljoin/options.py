@@ -263,7 +263,9 @@ class JoinOptions:
         (20,000) free guest vertices, and from there the coarse correction
         with three bending motions per cluster as well, rebuilt at the
         current positions whenever the guest has turned 0.2 rad
-        (:data:`igljoin.twolevel.AUTO_MODEL`): fewer iterations on tubes
+        (:data:`igljoin.twolevel.AUTO_MODEL`; a flat cluster too small for
+        its bending motions, fewer than six vertices, keeps its rigid ones:
+        :data:`igljoin.twolevel.SPANNED_BENDING`): fewer iterations on tubes
         too (203 / 230 against 486 / 746 at 40k / 100k) and less time on
         tubes and patches from 20k on (0.4–0.96 × ``P``'s iteration;
         docs/limits.md). The coarse corrections precondition the
@@ -272,8 +274,13 @@ class JoinOptions:
         factored form as well when the coarse model would
         hold more than :data:`igljoin.twolevel.AUTO_MAX_MODEL_ENTRIES`
         entries (counted before it is built; past that size it was
-        measured not to pay), and ``"two-level"`` is refused with an
-        ``OptionsError`` past :data:`igljoin.twolevel.MAX_MODEL_ENTRIES`.
+        measured not to pay) or when its coarse system cannot be factored
+        soundly (its ``fallback`` says why), and ``"two-level"`` is refused
+        with an ``OptionsError`` past
+        :data:`igljoin.twolevel.MAX_MODEL_ENTRIES`. The additive coarse
+        correction is solved on a second thread while the fine back-solve
+        runs (the same result; on two free cores the 100k patch's
+        back-solves take 0.7× the time).
     linear_solver : {"auto", "igl", "cholespy", "pardiso"}
         Sparse Cholesky backend of the global step: libigl's
         ``min_quad_with_fixed`` (always available), cholespy (the

@@ -35,6 +35,7 @@ descent directions and the line search keeps the energy from rising.
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -43,7 +44,7 @@ from scipy.sparse import csgraph
 
 from . import coarse_kernels as ck
 from .errors import OptionsError, SolveError
-from .linsolve import AugmentedQuadratic, FixedQuadratic, available_backends
+from .linsolve import AugmentedQuadratic, FixedQuadratic, augmented_upper, available_backends
 from .newton import (
     dofs,
     factor_entries,
@@ -64,12 +65,32 @@ __all__ = [
     "AUTO_MODEL",
     "MAX_MODEL_ENTRIES",
     "AUTO_MAX_MODEL_ENTRIES",
+    "SPANNED_BENDING",
 ]
 
 # relative ridge added to the coarse matrix: a cluster of three nearly collinear vertices
 # has a nearly free rotation about their line; 1e-10 of the mean diagonal keeps its
 # factorization finite without changing any other coarse mode measurably
 _RIDGE = 1e-10
+
+#: The bending motions of a cluster of fewer than six vertices whose part outside its
+#: rigid motions' span is at most this fraction of their size (the smallest eigenvalue of
+#: the Schur complement of the rigid block in the cluster's Gram matrix over the bending
+#: block's trace) are left out of the coarse space. A flat cluster of fewer than six
+#: vertices has too few normal displacements for three bending motions beside the tilts:
+#: on a 30k-vertex patch three clusters of three vertices have ratios of 6e-15 and less
+#: (spanned to rounding) and their coarse system's pivots were perturbed (7), which made
+#: "auto" give its model up. The smallest others measured, in models that factor soundly:
+#: 7.8e-8 (30k patch, five vertices), 2.3e-7 (100k patch), 2.0e-5 (20k patch); larger
+#: clusters along a tube's ring have one bending motion nearly rigid (1.9e-14 on the 20k
+#: tube, ten vertices; 1.6e-13 on the 100k tube, twenty; 7.3e-11 on the 40k tube) and the
+#: other two not: they keep all three, as before (leaving out only the spanned direction
+#: was not tried).
+SPANNED_BENDING = 1e-12
+
+# fewer vertices than this leave a flat cluster's bending motions spanned (three rigid and
+# three bending normal displacements)
+_BENDING_VERTICES = 6
 
 #: Largest number of entries the model may hold (:attr:`TwoLevelModel.model_entries`: the
 #: coarse system, :attr:`TwoLevelModel.coarse_entries`, the operators' cluster patterns and
@@ -110,7 +131,9 @@ class _CoarseAugmented(AugmentedQuadratic):
     copied into free blocks), ``Uᵀ`` is their transposed view, and Pardiso
     is handed the augmented matrix's upper triangle directly (not the whole
     matrix to cut it from) — at 300k guest vertices the copies and the
-    assembled block matrix had cost half as much again as the factorization.
+    assembled block matrix had cost half as much again as the factorization —
+    in the form it reads (:func:`igljoin.linsolve.augmented_upper`: no
+    conversion left to it).
     """
 
     #: the ridge of 1e-10 leaves ``A_c`` a condition number up to ~1e10, so a sound
@@ -132,23 +155,9 @@ class _CoarseAugmented(AugmentedQuadratic):
         if not n:
             return
         FixedQuadratic.made += 1
-        # [[S, Uᵀ], [U, −W⁻¹]]'s upper triangle: S's, Uᵀ beside it, the diagonal below
-        rows = np.repeat(np.arange(n), np.diff(S.indptr))
-        upper = S.indices >= rows
-        r = np.arange(len(keep))
-        at = np.repeat(r, np.diff(self.Kf.indptr))
-        A = sp.coo_matrix(
-            (
-                np.r_[S.data[upper], self.Kf.data, -1.0 / self.cw],
-                (
-                    np.r_[rows[upper], self.Kf.indices, n + r],
-                    np.r_[S.indices[upper], n + at, n + r],
-                ),
-            ),
-            shape=(n + len(keep), n + len(keep)),
-        )
-        del rows, upper, at
-        self._factor_augmented(A)
+        # [[S, Uᵀ], [U, −W⁻¹]]'s upper triangle: S's, Uᵀ beside it, the diagonal below,
+        # placed as Pardiso reads it (Uᵀ's rows made for it and let go)
+        self._factor_augmented(augmented_upper(S, sp.csr_matrix(self.Kft), -1.0 / self.cw))
 
     def _refused(self, exc: Exception) -> str:
         """The message when Pardiso reports the error ``exc``: the coarse system's."""
@@ -343,6 +352,49 @@ def bending_prolongation(X: np.ndarray, labels: np.ndarray) -> sp.csr_matrix:
     return _cluster_columns(_bending_blocks(X, labels), labels, a)
 
 
+def _spanned_bending(blocks: np.ndarray, labels: np.ndarray, a: int) -> np.ndarray:
+    """The clusters of fewer than six vertices whose bending motions their rigid ones span.
+
+    Per such cluster, the Gram matrix ``G`` (9, 9) of its motions' columns
+    (``blocks``, shape (m, 3, 9): six rigid, then three bending); the part
+    of the bending columns outside the rigid span is the Schur complement
+    ``G_bb − G_br G_rr⁻¹ G_rb`` (3, 3). A cluster is returned when its
+    smallest eigenvalue is at most :data:`SPANNED_BENDING` times
+    ``trace(G_bb)``. Only the few small clusters are looked at (a 100k
+    patch has a handful), so a build spends next to nothing on it.
+
+    Parameters
+    ----------
+    blocks : ndarray, shape (m, 3, 9)
+    labels : ndarray of int64, shape (m,)
+    a : int
+        Number of clusters.
+
+    Returns
+    -------
+    ndarray of int64, shape (k,)
+        The clusters, ascending.
+    """
+    small = np.flatnonzero(np.bincount(labels, minlength=a) < _BENDING_VERTICES)
+    if not small.size:
+        return small.astype(np.int64)
+    at = np.flatnonzero(np.isin(labels, small))
+    which = np.searchsorted(small, labels[at])
+    outer = np.einsum("vci,vcj->vij", blocks[at], blocks[at])
+    G = np.zeros((len(small), 9, 9))
+    np.add.at(G, which, outer)
+    rigid, cross, bend = G[:, :6, :6], G[:, :6, 6:], G[:, 6:, 6:]
+    # the rigid block is definite but for clusters of one or two vertices (turns about
+    # their line move nothing, and their columns and cross terms are zero): a ridge far
+    # below the test's threshold keeps the solve finite without changing its answer
+    ridge = 1e-14 * np.trace(rigid, axis1=1, axis2=2) + 1e-300
+    rigid = rigid + ridge[:, None, None] * np.eye(6)
+    schur = bend - np.einsum("aij,aik->ajk", cross, np.linalg.solve(rigid, cross))
+    smallest = np.linalg.eigvalsh(schur)[:, 0]
+    size = np.trace(bend, axis1=1, axis2=2)
+    return small[smallest <= SPANNED_BENDING * size].astype(np.int64)
+
+
 def _bending_blocks(X: np.ndarray, labels: np.ndarray) -> np.ndarray:
     """Every vertex's three bending rows (m, 3, 3) of :func:`bending_prolongation`."""
     a, count, r, radius = _about_centroids(X, labels)
@@ -482,6 +534,12 @@ class TwoLevelModel:
     motions : ndarray, shape (n_free, 3, w), or None
         Every free vertex's rows of ``A`` (:attr:`A` assembles them), ``w``
         = 6, or 9 with ``bending``.
+    left_out : ndarray of int64
+        Coarse unknowns of the latest build whose motions are left out (zero
+        columns of ``A``, their coarse unknown apart with a diagonal of
+        ``A_c``'s mean size): the bending motions of clusters of fewer than
+        six vertices whose rigid motions span them to rounding
+        (:data:`SPANNED_BENDING`).
     factors : list or None
         The balancing form's :func:`igljoin.newton.gauss_newton_factors`.
     fallback : str or None
@@ -516,6 +574,7 @@ class TwoLevelModel:
         self.built_at = []
         self.free_dofs = dofs(solver.free)
         self.labels = None
+        self.left_out = np.zeros(0, dtype=np.int64)
         self._cache = {}
         # set at the first build: the free vertices' clusters by vertex (-1 fixed) and their
         # rows in the motions, per term its operators' cluster patterns and whether it is
@@ -621,8 +680,15 @@ class TwoLevelModel:
         # build's peak (a 1M tube's coarse factorization holds ~5 GB)
         self.coarse_factor = self.factors = None
         blocks = _rigid_blocks(X, self.labels)
+        self.left_out = np.zeros(0, dtype=np.int64)
         if self.bending:
             blocks = np.concatenate([blocks, _bending_blocks(X, self.labels)], axis=2)
+            spanned = _spanned_bending(blocks, self.labels, self._clusters)
+            if spanned.size:
+                # their columns zero: A_c's rows for them are zero but for the diagonal
+                # _project gives them, and the coarse solve leaves them at zero
+                blocks[np.isin(self.labels, spanned), :, 6:] = 0.0
+                self.left_out = (9 * spanned[:, None] + np.arange(6, 9)).ravel()
         self.motions = np.ascontiguousarray(blocks)
         del blocks
         model = 0.0
@@ -774,6 +840,12 @@ class TwoLevelModel:
         else the solver's backend. Pardiso's numeric phase alone on the first
         build's analysis (0.17 s at 40k) crashed inside MKL on a rebuild of a
         100k tube's coarse matrix, so every build is a whole factorization.
+        The crash is MKL's after a back-solve on fewer threads than the
+        factorization's (as every back-solve here is made, on one): the
+        numeric phase then ends in a segmentation fault on the augmented
+        systems too (reproduced on the 30k patch's fine system and the 100k
+        patch's coarse one), and not after back-solves on the factorization's
+        threads.
         """
         ls = self.solver
         if U is not None:
@@ -844,7 +916,13 @@ class TwoLevelModel:
                 U.data**2 * np.repeat(weights, np.diff(U.indptr)),
                 minlength=w * a,
             )
-        Ac.setdiag(Ac.diagonal() + _RIDGE * diagonal.mean())
+        ridge = _RIDGE * diagonal.mean()
+        if self.left_out.size:
+            # a left-out motion's unknown stands alone: a diagonal of A_c's mean size keeps
+            # its pivot sound (its right-hand side, and so its value, is always zero)
+            ridge = np.full(len(diagonal), ridge)
+            ridge[self.left_out] = diagonal.mean()
+        Ac.setdiag(Ac.diagonal() + ridge)
         return (Ac, U, weights), seconds
 
     @property
@@ -862,6 +940,32 @@ class TwoLevelModel:
         coarse = ck.restrict(B, labels, v, self._clusters)
         return ck.prolong(B, labels, self.coarse_factor.solve_free(coarse[:, None])[:, 0])
 
+    def _coarse_beside(self, v: np.ndarray, work) -> tuple:
+        """``(work(), A A_c⁻¹ Aᵀ v)``, the second made on another thread while ``work`` runs.
+
+        ``work`` (the fine back-solve) runs in this thread; :meth:`_coarse` of
+        ``v`` (3 n_free,) on a second one. Both results are returned once both
+        have finished; an exception in either is raised here, after the
+        coarse thread has finished.
+        """
+        box = []
+
+        def coarse():
+            try:
+                box.append(self._coarse(v))
+            except BaseException as exc:  # raised in the caller's thread below
+                box.append(exc)
+
+        worker = threading.Thread(target=coarse, name="igljoin-coarse-solve", daemon=True)
+        worker.start()
+        try:
+            z = work()
+        finally:
+            worker.join()
+        if isinstance(box[0], BaseException):
+            raise box[0]
+        return z, box[0]
+
     def _model(self, v: np.ndarray) -> np.ndarray:
         """``H_ff v`` for ``v`` of shape (3 n_free,), from the factored model."""
         full = np.zeros(3 * self.solver.n)
@@ -872,14 +976,26 @@ class TwoLevelModel:
         return out[self.free_dofs]
 
     def solve_free(self, v: np.ndarray) -> np.ndarray:
-        """The preconditioner's inverse on ``v`` (n_free, 3); returns shape (n_free, 3)."""
+        """The preconditioner's inverse on ``v`` (n_free, 3); returns shape (n_free, 3).
+
+        The additive form's two solves are independent: the coarse one
+        (:meth:`_coarse`) runs on a second thread while this one makes the
+        fine back-solve (both release the GIL: Pardiso through ctypes, the
+        compiled ``Aᵀ`` and ``A``), and the two are added as before, so the
+        result is the same floats. On the 100k patch the fine back-solve
+        takes ~60 ms and the coarse ~22 ms an iteration, one core each: the
+        two together 64 against 90 ms one after the other, a join's
+        back-solves 3.6 against 5.2 s (two cores, load 1-2). Two MKL threads
+        for either solve instead were no faster in all (fine 49, coarse 12 ms).
+        """
         fine = self.solver.factor.solve_free
         v = np.ascontiguousarray(v, dtype=np.float64)
         flat = v.reshape(-1)
         if self.fallback is not None:
             return fine(v)
         if not self.balancing:
-            return fine(v) + self._coarse(flat).reshape(v.shape)
+            z, c = self._coarse_beside(flat, lambda: fine(v))
+            return z + c.reshape(v.shape)
         c = self._coarse(flat)
         z = fine((flat - self._model(c)).reshape(v.shape)).reshape(-1)
         return (c + z - self._coarse(self._model(z))).reshape(v.shape)

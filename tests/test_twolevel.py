@@ -6,7 +6,16 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 import igljoin
-from igljoin import newton, phantoms, twolevel
+from igljoin import coarse_kernels, newton, phantoms, twolevel
+
+
+def _left_out_apart(model, expected):
+    """``expected`` (the projected model) with the model's left-out unknowns apart: their
+    rows and columns zero (their motions are), their diagonal ``A_c``'s mean."""
+    if model.left_out.size:
+        assert not expected[model.left_out].any()
+        expected[model.left_out, model.left_out] = expected.diagonal().mean()
+    return expected
 
 
 def _solver(scenario, length="equal", resolution=0.5):
@@ -148,12 +157,91 @@ def test_coarse_matrix_is_the_projected_model(patch):
     assert model.refresh(state, 1) and not model.refresh(state, 2)
     H = newton.gauss_newton(ls.terms, state, ls.n)
     free = newton.dofs(ls.free)
-    expected = (model.A.T @ H[free][:, free] @ model.A).toarray()
+    expected = _left_out_apart(model, (model.A.T @ H[free][:, free] @ model.A).toarray())
     got = model.coarse_matrix().toarray()
     # the factored products against the assembled matrix: rounding (1e-12 of the largest
     # entry) plus the ridge of 1e-10 of the mean diagonal
     assert np.abs(got - expected).max() <= 1e-9 * np.abs(expected).max()
     assert sp.issparse(model.A) and model.factorizations == 1
+
+
+def _flat_cluster(rng, count):
+    """``count`` vertices of a plane patch (m, 3) and one cluster label for them."""
+    X = np.zeros((count, 3))
+    X[:, :2] = rng.uniform(-1.0, 1.0, (count, 2))
+    return X, np.zeros(count, dtype=np.int64)
+
+
+def test_bending_motions_the_rigid_ones_span_are_found():
+    rng = np.random.default_rng(2)
+    for count, spanned in ((3, True), (4, True), (5, True), (6, False), (20, False)):
+        X, labels = _flat_cluster(rng, count)
+        blocks = np.concatenate(
+            [twolevel._rigid_blocks(X, labels), twolevel._bending_blocks(X, labels)], axis=2
+        )
+        # a flat cluster's normal displacements: `count` of them, three of them rigid (the
+        # translation and two tilts), so three bending motions need six vertices
+        assert twolevel._spanned_bending(blocks, labels, 1).size == spanned, count
+    # six or more vertices are never left out, even with every bending motion spanned (a
+    # cluster on a line: no bending normal to it)
+    X = np.zeros((8, 3))
+    X[:, 0] = np.linspace(0.0, 1.0, 8)
+    labels = np.zeros(8, dtype=np.int64)
+    blocks = np.concatenate(
+        [twolevel._rigid_blocks(X, labels), twolevel._bending_blocks(X, labels)], axis=2
+    )
+    assert twolevel._spanned_bending(blocks, labels, 1).size == 0
+    # one or two vertices: no turn about their line, the test still answers
+    for count in (1, 2):
+        X, labels = _flat_cluster(rng, count)
+        blocks = np.concatenate(
+            [twolevel._rigid_blocks(X, labels), twolevel._bending_blocks(X, labels)], axis=2
+        )
+        assert twolevel._spanned_bending(blocks, labels, 1).tolist() == [0]
+
+
+def test_left_out_motions_leave_the_coarse_system_sound(patch):
+    ls = patch.solver
+    state, _, _ = ls.local(patch.initial_guess())
+    # clusters of 4 vertices: many are too small for their bending motions
+    model = twolevel.TwoLevelModel(ls, cluster_size=4, bending=True)
+    model.refresh(state, 1)
+    assert model.left_out.size and model.fallback is None
+    v = np.random.default_rng(4).standard_normal(3 * len(ls.free))
+    restricted = coarse_kernels.restrict(model.motions, model.labels, v, model._clusters)
+    assert not restricted[model.left_out].any()
+    # their unknowns stand apart: zero in every coarse solve
+    y = model.coarse_factor.solve_free(restricted[:, None])[:, 0]
+    assert np.isfinite(y).all() and not y[model.left_out].any()
+    # and the rest solves A_c y = Aᵀ v: a residual at the rounding of a factorization
+    # whose ridge bounds the condition number by ~1e10 (1e-5 far above it)
+    Ac = model.coarse_matrix()
+    assert np.linalg.norm(Ac @ y - restricted) <= 1e-5 * np.linalg.norm(restricted)
+
+
+def test_the_additive_solve_adds_the_coarse_thread_to_the_fine_back_solve(patch):
+    ls = patch.solver
+    state, _, _ = ls.local(patch.initial_guess())
+    model = twolevel.TwoLevelModel(ls, bending=True)
+    model.refresh(state, 1)
+    v = np.random.default_rng(5).standard_normal((len(ls.free), 3))
+    # the coarse solve made on its own thread: the same floats as one after the other
+    expected = ls.factor.solve_free(v) + model._coarse(v.reshape(-1)).reshape(v.shape)
+    np.testing.assert_array_equal(model.solve_free(v), expected)
+
+
+def test_an_error_in_the_coarse_thread_is_raised_in_the_caller(patch, monkeypatch):
+    ls = patch.solver
+    state, _, _ = ls.local(patch.initial_guess())
+    model = twolevel.TwoLevelModel(ls)
+    model.refresh(state, 1)
+
+    def broken(v):
+        raise FloatingPointError("coarse solve failed")
+
+    monkeypatch.setattr(model, "_coarse", broken)
+    with pytest.raises(FloatingPointError, match="coarse solve failed"):
+        model.solve_free(np.ones((len(ls.free), 3)))
 
 
 @pytest.mark.parametrize("scenario", ["partial_patch", "end_to_end"])
@@ -230,7 +318,7 @@ def test_a_rebuild_projects_the_model_at_the_new_positions(patch):
     # `later`, as the assembled Gauss–Newton matrix gives it
     H = newton.gauss_newton(ls.terms, later, ls.n)
     free = newton.dofs(ls.free)
-    expected = (model.A.T @ H[free][:, free] @ model.A).toarray()
+    expected = _left_out_apart(model, (model.A.T @ H[free][:, free] @ model.A).toarray())
     got = model.coarse_matrix().toarray()
     # rounding (1e-12 of the largest entry) plus the ridge of 1e-10 of the mean diagonal
     assert np.abs(got - expected).max() <= 1e-9 * np.abs(expected).max()
