@@ -810,11 +810,12 @@ class TwoLevelModel:
             "are then kept out of the coarse matrix), "
         )
         name, limit = self._limit()
+        gb = _BYTES_PER_ENTRY * self.model_entries / 1e9
+        size = f"{gb:.0f}" if gb >= 1 else f"{gb:.2g}"
         return (
             f"the two-level preconditioner's model would hold {self.model_entries:,} entries "
             f"(its coarse system {self.coarse_entries:,}), more than "
-            f"igljoin.twolevel.{name} = {limit:,} (about "
-            f"{_BYTES_PER_ENTRY * self.model_entries / 1e9:.0f} GB at its first build): use "
+            f"igljoin.twolevel.{name} = {limit:,} (about {size} GB at its first build): use "
             "preconditioner='factored' (or 'auto', which then keeps the factored form), "
             f"{pardiso}or raise igljoin.twolevel.{name}"
         )

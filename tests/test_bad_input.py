@@ -56,6 +56,18 @@ def _join(guest=None, host=None, hc=HC, gc=None, **kw):
     )
 
 
+def _two_level_past_its_limit():
+    """A two-level join whose model is over ``MAX_MODEL_ENTRIES``, lowered to 1,000."""
+    from igljoin import twolevel
+
+    before = twolevel.MAX_MODEL_ENTRIES
+    twolevel.MAX_MODEL_ENTRIES = 1_000
+    try:
+        return _join(preconditioner="two-level")
+    finally:
+        twolevel.MAX_MODEL_ENTRIES = before
+
+
 def _write(tmp: Path, name: str, data: bytes) -> Path:
     p = tmp / name
     p.write_bytes(data)
@@ -397,6 +409,14 @@ def _corpus() -> list[Case]:
             lambda t: _join(stiffness=np.ones(3)),
             igljoin.OptionsError,
             ("stiffness has 3 values",),
+        ),
+        Case(
+            # the limit lowered to 1,000 entries stands in for a guest of millions of
+            # vertices (the real limit is met only by models of several GB)
+            "two-level model past its size limit",
+            lambda t: _two_level_past_its_limit(),
+            igljoin.OptionsError,
+            ("two-level preconditioner's model would hold", "preconditioner='factored'"),
         ),
         Case(
             "not a mesh",
