@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -237,19 +238,15 @@ class _LoopIndex:
             self.loop_of[lp] = k
             self.pos_of[lp] = np.arange(len(lp))
         self.boundary = np.flatnonzero(self.loop_of >= 0)
-        self._mean_edge: float | None = None
 
-    @property
+    @cached_property
     def mean_edge(self) -> float:
         """Mean boundary edge length (0 without a boundary), made when a point is snapped."""
-        if self._mean_edge is None:
-            if self.boundary.size:
-                V = self.mesh.V
-                edge = [np.linalg.norm(V[lp] - V[np.roll(lp, -1)], axis=1) for lp in self.loops]
-                self._mean_edge = float(np.mean(np.concatenate(edge)))
-            else:
-                self._mean_edge = 0.0
-        return self._mean_edge
+        if not self.boundary.size:
+            return 0.0
+        V = self.mesh.V
+        edge = [np.linalg.norm(V[lp] - V[np.roll(lp, -1)], axis=1) for lp in self.loops]
+        return float(np.mean(np.concatenate(edge)))
 
     def vertex(self, spec: Any, what: str) -> int:
         """Resolve a vertex index or a 3D point to a boundary vertex index."""

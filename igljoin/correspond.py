@@ -709,9 +709,11 @@ def _directed_edges_at(F, a, b, n):
     Returns ``order`` (each one's half-edge ``3 f + e``, running ``F[f, e] ->
     F[f, (e + 1) % 3]``) and ``skey`` (their keys, ascending). Only the faces
     with two corners among the split edges' ends ``a``, ``b`` (k,) can hold a
-    split half-edge, so only theirs are sorted; where there are none, or two
-    of them run the same way, every face's half-edges are (the order among
-    equal keys is then the sort's of all of them, as before).
+    split half-edge, so only theirs are sorted. Every face's half-edges are
+    sorted instead where there are none (the split's search then finds its
+    missing edges among all of them and reports them, as an empty array
+    could not) or two of them run the same way (the order among equal keys
+    is then the sort's of all of them, as before).
     """
     on = np.zeros(n, dtype=bool)
     on[a] = True

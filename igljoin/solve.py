@@ -513,10 +513,7 @@ class LocalGlobalSolver:
                 break
         else:
             result.reason = "max_iterations"
-        X = np.empty((self.n, 3))
-        X[free] = x
-        X[fixed] = bc
-        result.X = X
+        result.X = kernels.join_rows(self.n, free, x, fixed, bc)
         result.energy = energy
         result.timings = dict(clock)
         if model is not None:

@@ -283,7 +283,7 @@ def repeated_directed_edges(F: np.ndarray, n: int | None = None) -> int:
     return int((row_counts(directed, n) > 1).sum())
 
 
-def repeated_directed_pairs(half) -> int:
+def repeated_directed_pairs(half, pairs: np.ndarray | None = None) -> int:
     """:func:`repeated_directed_edges` of a surface whose edges have at most two face sides.
 
     Read from its half-edges sorted by undirected edge (``half_edges(F, n)``):
@@ -295,14 +295,19 @@ def repeated_directed_pairs(half) -> int:
     ----------
     half : tuple
         ``half_edges(F, n)``.
+    pairs : ndarray of int64, optional
+        Where each run of two equal keys starts in the sorted half-edges
+        (``start[count == 2]`` of :func:`runs`, when a caller has them);
+        found here otherwise.
 
     Returns
     -------
     int
     """
     src, _, order, skey = half
-    run = np.flatnonzero(skey[1:] == skey[:-1])
-    return int(np.count_nonzero(src[order[run]] == src[order[run + 1]]))
+    if pairs is None:
+        pairs = np.flatnonzero(skey[1:] == skey[:-1])
+    return int(np.count_nonzero(src[order[pairs]] == src[order[pairs + 1]]))
 
 
 def orientable(F: np.ndarray) -> bool:

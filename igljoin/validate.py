@@ -169,7 +169,7 @@ def check_surface(mesh: Mesh, role: str) -> None:
             f"{bad[:3].tolist()}); {fix}"
         )
     # every edge has at most two sides and no face repeats a vertex (both checked above)
-    dcount = topology.repeated_directed_pairs(half)
+    dcount = topology.repeated_directed_pairs(half, start[cnt == 2])
     if dcount:
         if not topology.orientable(F):
             raise MeshError(
