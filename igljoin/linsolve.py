@@ -333,10 +333,13 @@ def augmented_upper(S: sp.csr_matrix, Kt: sp.csr_matrix, d: np.ndarray) -> sp.cs
     del rows
     s_count = np.bincount(s_rows, minlength=m)
     k_count = np.diff(Kt.indptr)
-    indptr = np.zeros(m + r + 1, dtype=np.int64)
+    total = int(s_count.sum() + Kt.nnz + r)
+    # the index type scipy keeps (and LP64 Pardiso reads): no copy of the largest arrays
+    index = np.int32 if max(total, m + r) < 2**31 else np.int64
+    indptr = np.zeros(m + r + 1, dtype=index)
     np.cumsum(np.r_[s_count + k_count, np.ones(r, dtype=np.int64)], out=indptr[1:])
-    data = np.empty(indptr[-1])
-    indices = np.empty(indptr[-1], dtype=np.int64)
+    data = np.empty(total)
+    indices = np.empty(total, dtype=index)
     # S's kept entries first in their row, in their order
     first = np.cumsum(s_count) - s_count
     at = indptr[s_rows] + np.arange(len(s_rows)) - first[s_rows]
@@ -352,7 +355,8 @@ def augmented_upper(S: sp.csr_matrix, Kt: sp.csr_matrix, d: np.ndarray) -> sp.cs
     data[indptr[m:-1]] = d
     indices[indptr[m:-1]] = m + np.arange(r)
     U = sp.csr_matrix((data, indices, indptr), shape=(m + r, m + r))
-    U.has_sorted_indices = True
+    # sorted and without duplicates as placed (S and Kt canonical, d one per row)
+    U.has_canonical_format = True
     return U
 
 

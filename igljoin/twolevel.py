@@ -668,13 +668,14 @@ class TwoLevelModel:
             self._where[ls.free] = np.arange(len(ls.free))
             self._clusters = int(self.labels.max()) + 1
             self._wide = self._count(self._clusters, 9 if self.bending else 6)
-            if self.model_entries > self._limit()[1]:
-                self.seconds["clusters"] += time.perf_counter() - t0
-                message = self._too_large()
-                if not self.fall_back:
-                    raise OptionsError(message)
-                self.fallback = message
-                return False
+        if self.model_entries > self._limit()[1]:
+            # at every build (a model refused before is refused again), before any is made
+            self.seconds["clusters"] += time.perf_counter() - t0
+            message = self._too_large()
+            if not self.fall_back:
+                raise OptionsError(message)
+            self.fallback = message
+            return False
         t1 = time.perf_counter()
         # a rebuild lets the last factorization go first: the two together are the
         # build's peak (a 1M tube's coarse factorization holds ~5 GB)

@@ -29,6 +29,8 @@ def test_the_placed_triangle_is_the_assembled_matrix_cut(seed):
     np.testing.assert_array_equal(U.indptr, ref.indptr)
     np.testing.assert_array_equal(U.indices, ref.indices)
     np.testing.assert_array_equal(U.data, ref.data)
+    # the index type LP64 Pardiso reads, so that it takes the arrays without a copy
+    assert U.indptr.dtype == U.indices.dtype == np.int32
 
 
 def test_unsorted_parts_are_placed_in_order():

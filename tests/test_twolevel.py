@@ -150,11 +150,19 @@ def test_the_coarse_space_is_rebuilt_once_the_guest_has_turned(patch):
     assert not never.refresh(later, 2) and never.factorizations == 1
 
 
-def test_coarse_matrix_is_the_projected_model(patch):
+@pytest.mark.parametrize(
+    "options",
+    # the rigid motions of clusters of 20; and rigid and bending motions of clusters of 5,
+    # some of which are flat clusters too small for their bending motions (left out)
+    [{}, {"cluster_size": 5, "bending": True}],
+    ids=["rigid", "bending with some left out"],
+)
+def test_coarse_matrix_is_the_projected_model(patch, options):
     ls = patch.solver
     state, _, _ = ls.local(patch.initial_guess())
-    model = twolevel.TwoLevelModel(ls)
+    model = twolevel.TwoLevelModel(ls, **options)
     assert model.refresh(state, 1) and not model.refresh(state, 2)
+    assert bool(model.left_out.size) == bool(options)
     H = newton.gauss_newton(ls.terms, state, ls.n)
     free = newton.dofs(ls.free)
     expected = _left_out_apart(model, (model.A.T @ H[free][:, free] @ model.A).toarray())
@@ -224,6 +232,7 @@ def test_the_additive_solve_adds_the_coarse_thread_to_the_fine_back_solve(patch)
     state, _, _ = ls.local(patch.initial_guess())
     model = twolevel.TwoLevelModel(ls, bending=True)
     model.refresh(state, 1)
+    assert model.fallback is None  # the two-level solve, not P's alone
     v = np.random.default_rng(5).standard_normal((len(ls.free), 3))
     # the coarse solve made on its own thread: the same floats as one after the other
     expected = ls.factor.solve_free(v) + model._coarse(v.reshape(-1)).reshape(v.shape)
