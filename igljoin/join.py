@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from . import kernels
 from . import seams as seams_
+from .correspond import rigid_fit
 from .errors import OptionsError
 from .host_values import HostValues
 from .join_terms import TermInputs, build_terms, seam_bands
@@ -30,7 +30,7 @@ from .options import JoinOptions
 from .result import JoinResult
 from .seams import SeamPair
 from .solve import LocalGlobalSolver, QuasiNewtonMemory
-from .start import bulge, bulge_basis, path_prediction, rigid_start, rigid_turn
+from .start import bulge, bulge_basis, path_prediction, rigid_start
 from .stiffness import needs_guest, resolve_stiffness
 from .terms import unique_edges
 from .twolevel import preferred_model
@@ -87,9 +87,10 @@ class _Kept:
         Its run's quasi-Newton pairs, kept for a result on a path (``earlier``
         not empty): the next re-solve along the path starts with them.
     rotations : ndarray, shape (n', 3, 3), or None
-        The rotations its run's last local step fitted, kept with the pairs:
-        the next re-solve's first rotation fit starts from them, turned as its
-        start was turned.
+        The rotations its run's last local step fitted, kept for a result on
+        a path (9n' floats, whatever becomes of the pairs): the next re-solve's
+        first rotation fit starts from them, turned as the seam turns from
+        this result onto the new targets.
     """
 
     X: np.ndarray
@@ -202,9 +203,10 @@ class JoinSolver:
     it (so a solve in between, e.g. a cold one, does not cut a path), and
     the quasi-Newton pairs of the newest ``PAIRS_KEPT`` (2) results on a
     path (2 × (acceleration + 1) × 3n' floats each, kept up to
-    ``PAIRS_MAX_BYTES``, 256 MiB), with the rotations their last local
-    step fitted (9n' floats; the next step's first rotation fit starts
-    from them, turned as its start was turned); an option change that
+    ``PAIRS_MAX_BYTES``, 256 MiB), and for every result on a path the
+    rotations its last local step fitted (9n' floats; the next step's first
+    rotation fit starts from them, turned as the seam turns onto the new
+    targets); an option change that
     rebuilds the factorization forgets them, a change of the iteration
     settings does not (it leaves the minima where they are).
 
@@ -405,17 +407,14 @@ class JoinSolver:
         ndarray, shape (n', 3)
         """
         X = self._start_positions(start)
-        return self._warm_start(X, targets, self._kept_at(X))[0]
+        return self._warm_start(X, targets, self._kept_at(X))
 
-    def _warm_start(
-        self, X: np.ndarray, targets: np.ndarray, kept: _Kept | None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`warm_start` from checked positions ``X`` (n', 3), kept as ``kept`` (or not),
-        and the rotation (3, 3) of its rigid motion."""
+    def _warm_start(self, X: np.ndarray, targets: np.ndarray, kept: _Kept | None) -> np.ndarray:
+        """:meth:`warm_start` from checked positions ``X`` (n', 3), kept as ``kept`` (or not)."""
         seam = self.corr.seam
         X = path_prediction(X, [] if kept is None else list(kept.earlier), seam, targets)
-        X, R = rigid_turn(X, seam, targets)
-        return X + self.solver.extend(targets - X[seam]), R
+        X = rigid_start(X, seam, targets)
+        return X + self.solver.extend(targets - X[seam])
 
     def _start_positions(self, start: Any) -> np.ndarray:
         """``start`` as a checked (n', 3) array of positions (a copy)."""
@@ -453,12 +452,12 @@ class JoinSolver:
             return  # not a minimum: nothing to predict from
         earlier = () if before is None else (*before.earlier, before.X)[-PATH_LENGTH:]
         memory = run.memory if earlier else None
-        rotations = None if memory is None else run.rotations
+        rotations = run.rotations if earlier else None
         kept = [*self._kept, _Kept(np.array(X, dtype=np.float64), earlier, memory, rotations)]
         # the pairs are large (2 (acceleration + 1) 3n' floats): the newest PAIRS_KEPT only
         holding = [i for i, k in enumerate(kept) if k.memory is not None][:-PAIRS_KEPT]
         for i in holding:
-            kept[i] = replace(kept[i], memory=None, rotations=None)
+            kept[i] = replace(kept[i], memory=None)
         self._kept = kept[-KEPT_RESULTS:]
 
     def solve(
@@ -530,10 +529,11 @@ class JoinSolver:
         else:
             start = self._start_positions(start)
             kept = self._kept_at(start)
-            X0, turn = self._warm_start(start, bc, kept)
+            X0 = self._warm_start(start, bc, kept)
             if kept is not None and kept.rotations is not None:
-                # the rotations the path's last run ended with, turned as the start was
-                hint = kernels.turn_rotations(turn, kept.rotations)
+                # the rotations the path's last run ended with, turned as its seam turns
+                # onto the new targets
+                hint = np.matmul(rigid_fit(start[c.seam], bc)[0], kept.rotations)
         t1 = time.perf_counter()
 
         def report(iteration: int, energy: float) -> None:

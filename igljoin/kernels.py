@@ -35,7 +35,6 @@ __all__ = [
     "smooth_local",
     "band_local",
     "dot",
-    "turn_rotations",
     "join_rows",
     "step",
     "abs_max",
@@ -793,23 +792,6 @@ def lbfgs_second_loop(z, S, Y, rho, order, alpha):  # pragma: no cover - compile
             s0 += Yn[i] * z[i]
         slot = nxt
         b = s0 + s1
-
-
-@nb.njit(cache=True)
-def turn_rotations(T, R):  # pragma: no cover - compiled
-    """``T R_v`` for each rotation ``R_v`` of ``R`` (n, 3, 3) and one ``T`` (3, 3): (n, 3, 3).
-
-    Each entry ``Σ_k T[i, k] R_v[k, j]`` summed left to right.
-    """
-    out = np.empty_like(R)
-    for v in range(R.shape[0]):
-        for i in range(3):
-            t0 = T[i, 0]
-            t1 = T[i, 1]
-            t2 = T[i, 2]
-            for j in range(3):
-                out[v, i, j] = t0 * R[v, 0, j] + t1 * R[v, 1, j] + t2 * R[v, 2, j]
-    return out
 
 
 @nb.njit(cache=True)

@@ -24,7 +24,7 @@ from .correspond import rigid_fit
 from .frames import face_areas, seam_frames
 from .mesh import Mesh
 
-__all__ = ["rigid_start", "rigid_turn", "path_prediction", "bulge", "bulge_basis", "BulgeBasis"]
+__all__ = ["rigid_start", "path_prediction", "bulge", "bulge_basis", "BulgeBasis"]
 
 
 def rigid_start(V: np.ndarray, seam: np.ndarray, targets: np.ndarray) -> np.ndarray:
@@ -40,27 +40,8 @@ def rigid_start(V: np.ndarray, seam: np.ndarray, targets: np.ndarray) -> np.ndar
     -------
     ndarray, shape (n, 3)
     """
-    return rigid_turn(V, seam, targets)[0]
-
-
-def rigid_turn(
-    V: np.ndarray, seam: np.ndarray, targets: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`rigid_start` and the rotation ``R`` (3, 3) of its motion (``V R^T + t``).
-
-    Parameters
-    ----------
-    V : ndarray, shape (n, 3)
-    seam : ndarray of int64, shape (s,)
-    targets : ndarray, shape (s, 3)
-
-    Returns
-    -------
-    X : ndarray, shape (n, 3)
-    R : ndarray, shape (3, 3)
-    """
     R, t = rigid_fit(V[seam], targets)
-    return V @ R.T + t, R
+    return V @ R.T + t
 
 
 def path_prediction(

@@ -585,10 +585,15 @@ def test_a_re_solve_along_a_path_starts_its_rotation_fit_from_the_step_before(pa
     assert given[0] is None and given[1] is None
     n = len(solver.corr.V)
     assert ended[1].shape == (n, 3, 3) and given[2].shape == (n, 3, 3)
-    # the hint is the step before's last rotations, turned by the start's rigid motion
-    X0, turn = solver._warm_start(step1.guest.V, T2, solver._kept_at(step1.guest.V))
-    # (a product of 3 x 3 matrices summed in another order: rounding of unit entries)
-    assert np.allclose(given[2], np.matmul(turn, ended[1]), rtol=0.0, atol=1e-15)
+    # the hint is the step before's last rotations, turned as the seam turns from the step
+    # before onto the new targets
+    seam = solver.corr.seam
+    turn = igljoin.correspond.rigid_fit(step1.guest.V[seam], T2)[0]
+    assert np.array_equal(given[2], np.matmul(turn, ended[1]))
+    # a turn of about the slider's step (1 degree), not of nothing
+    angle = np.degrees(np.arccos(np.clip((np.trace(turn) - 1.0) / 2.0, -1.0, 1.0)))
+    assert 0.5 < angle < 1.5  # the seam's fit turns with the slider's 1 degree, within half
+    X0 = solver._warm_start(step1.guest.V, T2, solver._kept_at(step1.guest.V))
     # the same step's run without the hint: the same iterations, the same minimum to the
     # rounding the rotation fit leaves (Newton stops at a step of 1e-7 rad, so each
     # rotation is exact to about 1e-14; the energies agree to 1e-10 relative)
