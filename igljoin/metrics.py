@@ -36,7 +36,6 @@ Self-intersections
 
 from __future__ import annotations
 
-import math
 from functools import cached_property
 from typing import NamedTuple
 
@@ -122,16 +121,6 @@ def edge_strain(
     """
     E = np.asarray(E)
     l0 = edge_lengths(V0, E) if rest_lengths is None else rest_lengths
-    V1 = np.asarray(V1)
-    if (
-        len(E)
-        and E.dtype == np.int64
-        and E.ndim == 2
-        and V1.dtype == np.float64
-        and V1.ndim == 2
-        and l0.dtype == np.float64
-    ):
-        return _edge_strain(V1, E, l0, np.empty(len(E)))
     l1 = edge_lengths(V1, E)
     return (l1 - l0) / np.where(l0 > 0, l0, np.nan)
 
@@ -193,8 +182,6 @@ def vertex_strain(
         incidence = vertex_incidence(E[ok], n)
         s = s[ok]
     ends, count = incidence
-    if len(ends) and ends.dtype == np.int64 and count.dtype == np.int64:
-        return _vertex_means(ends, s, count, np.zeros(len(count)))
     total = np.bincount(ends, weights=np.repeat(s, 2), minlength=n)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(count > 0, total / np.maximum(count, 1), np.nan)
@@ -890,41 +877,6 @@ _plane_side = _nb.njit(cache=True, inline="always")(_plane_side)
 _wedges_apart = _nb.njit(cache=True)(_wedges_apart)
 _pair_apart = _nb.njit(cache=True, inline="always")(_pair_apart)
 _apart = _nb.njit(cache=True)(_apart_faces)
-
-
-@_nb.njit(cache=True)
-def _edge_strain(V1, E, l0, out):  # pragma: no cover - compiled
-    """:func:`edge_strain` with the rest lengths ``l0`` (e,) given, into ``out`` (e,).
-
-    The floats of the numpy expression: each length the root of the squared
-    differences summed left to right (:func:`_row_norms`), then ``(l1 − l0) /
-    l0``, NaN where ``l0`` is not positive.
-    """
-    for e in range(E.shape[0]):
-        i = E[e, 0]
-        j = E[e, 1]
-        d0 = V1[i, 0] - V1[j, 0]
-        d1 = V1[i, 1] - V1[j, 1]
-        d2 = V1[i, 2] - V1[j, 2]
-        length = math.sqrt((d0 * d0 + d1 * d1) + d2 * d2)
-        rest = l0[e]
-        out[e] = (length - rest) / (rest if rest > 0 else math.nan)
-    return out
-
-
-@_nb.njit(cache=True)
-def _vertex_means(ends, s, count, total):  # pragma: no cover - compiled
-    """:func:`vertex_strain` of finite strains ``s`` (e,) from the incidence, in ``total`` (n,).
-
-    The edges' strains are added to their ends' totals in the order of
-    ``ends`` (as ``np.bincount`` adds its weights), then each total is divided by
-    its count (NaN where there is none).
-    """
-    for k in range(ends.shape[0]):
-        total[ends[k]] += s[k >> 1]
-    for v in range(total.shape[0]):
-        total[v] = total[v] / count[v] if count[v] > 0 else math.nan
-    return total
 
 
 def point_polyline_distance(P: np.ndarray, C: np.ndarray, closed: bool) -> np.ndarray:

@@ -782,33 +782,6 @@ def test_kept_incidence_and_rigid_reference_give_the_plain_maps(joins):
                 assert np.allclose(got, plain, rtol=0, atol=1e-12 * np.ptp(V0))
 
 
-def test_compiled_strains_are_the_numpy_expressions(joins):
-    """Edge strain (coordinate-major arrays, zero-length rest edges) and vertex strain (the
-    strains added per end in edge order, as ``np.bincount`` adds them) from compiled loops."""
-    for _, res in joins.values():
-        V0, V1, F = res.rest_guest.V, res.guest.V, res.guest.F
-        E = np.asarray(igl.edges(F), dtype=np.int64)
-        E[::11, 1] = E[::11, 0]  # edges of zero rest length: NaN strain
-        n = len(V0)
-        l0 = metrics.edge_lengths(V0, E)
-        Vc, Ec = (np.ascontiguousarray(A.T).T for A in (V1, E))
-        want = (metrics.edge_lengths(Vc, Ec) - l0) / np.where(l0 > 0, l0, np.nan)
-        for got in (
-            metrics.edge_strain(V0, Vc, Ec, rest_lengths=l0),
-            metrics.edge_strain(V0, V1, E),
-        ):
-            _assert_same(got, want)
-        ok = np.isfinite(want)
-        assert not ok.all()
-        for strain, edges in ((np.where(ok, want, 0.5), E), (want[ok], E[ok])):
-            ends, count = metrics.vertex_incidence(edges, n)
-            total = np.bincount(ends, weights=np.repeat(strain, 2), minlength=n)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                plain = np.where(count > 0, total / np.maximum(count, 1), np.nan)
-            _assert_same(metrics.vertex_strain(edges, strain, n), plain)
-        _assert_same(metrics.vertex_strain(E, want, n), plain)  # the finite ones only
-
-
 def test_folded_pairs_from_given_normals(joins):
     for _, res in joins.values():
         V0, F = res.rest_guest.V, res.guest.F
