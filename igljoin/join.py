@@ -583,6 +583,12 @@ class JoinSolver:
             built=self.built,
             rest=self._rest,
         )
+        if model is not None:
+            result.coarse_model = {
+                "in_use": model.fallback is None,
+                "builds": int(run.stats["model_builds"]),
+                "fallback": model.fallback,
+            }
         self._keep(kept, run, result.guest.V)
         t3 = time.perf_counter()
         timings = dict(self.timings)

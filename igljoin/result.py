@@ -143,6 +143,14 @@ class JoinResult:
     host_offsets : ndarray of int64, shape (h + 1,)
         Host mesh ``i`` has the combined host vertices
         ``host_offsets[i]:host_offsets[i + 1]`` (``[0, n_h]`` for one host).
+    coarse_model : dict
+        What the solve did with the coarse model of the ``preconditioner``
+        option: ``"in_use"`` (the model preconditioned the steps to the
+        solve's end), ``"builds"`` (its factorizations in this solve; 0 for
+        a model kept from the solve before) and ``"fallback"`` (why
+        ``"auto"`` went on with the factored form alone, or ``None``).
+        ``{"in_use": False, "builds": 0, "fallback": None}`` where no model
+        was asked for (``"factored"``, or ``"auto"`` below its size).
     merged : Welded
         Host and deformed guest welded into one mesh (computed on first use,
         then kept; see :func:`igljoin.weld.weld`).
@@ -169,6 +177,9 @@ class JoinResult:
     metrics: dict = field(default_factory=dict)
     stop_reason: str = ""
     host_offsets: np.ndarray | None = None
+    coarse_model: dict = field(
+        default_factory=lambda: {"in_use": False, "builds": 0, "fallback": None}
+    )
     _merged: Welded | None = field(default=None, init=False, repr=False, compare=False)
     _warnings: tuple | None = field(default=None, init=False, repr=False, compare=False)
 
@@ -284,6 +295,7 @@ class JoinResult:
                 "converged": bool(self.converged),
                 "stop_reason": self.stop_reason,
                 "iterations": int(self.iterations),
+                "coarse_model": dict(self.coarse_model),
                 "energy": {"initial": float(self.energy[0]), "final": float(self.energy[-1])},
                 "counts": {k: int(v) for k, v in self.counts.items()},
                 "timings": {k: float(v) for k, v in self.timings.items()},

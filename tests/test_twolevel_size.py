@@ -163,6 +163,11 @@ def test_auto_keeps_the_factored_form_when_the_coarse_system_is_too_large(monkey
     # and the solver keeps the model, which says why it kept P
     assert "AUTO_MAX_MODEL_ENTRIES" in solver.last_model.fallback
     assert solver.last_run.stats["model_builds"] == 0
+    # so do the result and its report (the factored join has no model to speak of)
+    said = auto.report()["coarse_model"]
+    assert not said["in_use"] and said["builds"] == 0
+    assert "AUTO_MAX_MODEL_ENTRIES" in said["fallback"]
+    assert default.report()["coarse_model"] == {"in_use": False, "builds": 0, "fallback": None}
 
 
 @pardiso
@@ -241,3 +246,12 @@ def test_auto_goes_on_with_p_when_its_coarse_system_cannot_be_factored(patch30k,
     for _ in range(2):
         with pytest.raises(igljoin.SolveError, match="preconditioner='factored'"):
             model.refresh(_start(solver), 1)
+
+
+def test_a_join_reports_its_coarse_model():
+    solver = _solver("partial_patch")
+    first = solver.solve(preconditioner="two-level")
+    assert first.report()["coarse_model"] == {"in_use": True, "builds": 1, "fallback": None}
+    # the explicit two-level model is built once per solve (it has no rebuild angle)
+    again = solver.solve()
+    assert again.coarse_model == {"in_use": True, "builds": 1, "fallback": None}
