@@ -279,7 +279,8 @@ class JoinOptions:
         with an ``OptionsError`` past
         :data:`igljoin.twolevel.MAX_MODEL_ENTRIES`. The additive coarse
         correction is solved on a second thread while the fine back-solve
-        runs (the same result; on two free cores the 100k patch's
+        runs, from :data:`igljoin.twolevel.CONCURRENT_FROM_VERTICES` free
+        vertices (the same result; on two free cores the 100k patch's
         back-solves take 0.7× the time).
     linear_solver : {"auto", "igl", "cholespy", "pardiso"}
         Sparse Cholesky backend of the global step: libigl's

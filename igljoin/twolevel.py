@@ -66,6 +66,7 @@ __all__ = [
     "MAX_MODEL_ENTRIES",
     "AUTO_MAX_MODEL_ENTRIES",
     "SPANNED_BENDING",
+    "CONCURRENT_FROM_VERTICES",
 ]
 
 # relative ridge added to the coarse matrix: a cluster of three nearly collinear vertices
@@ -91,6 +92,12 @@ SPANNED_BENDING = 1e-12
 # fewer vertices than this leave a flat cluster's bending motions spanned (three rigid and
 # three bending normal displacements)
 _BENDING_VERTICES = 6
+
+#: Free vertices from which the additive form's coarse solve runs on a second thread beside
+#: the fine back-solve: a thread per solve costs ~0.3 ms, which at the paper's size made the
+#: explicit "two-level" join 1.25-1.5x slower (the longer patch 112 -> 172 ms); at 40k (a
+#: tube: 32.2 against 32.7 ms a solve) the two were even, at 100k the back-solves took 0.7x.
+CONCURRENT_FROM_VERTICES = 40_000
 
 #: Largest number of entries the model may hold (:attr:`TwoLevelModel.model_entries`: the
 #: coarse system, :attr:`TwoLevelModel.coarse_entries`, the operators' cluster patterns and
@@ -980,7 +987,8 @@ class TwoLevelModel:
     def solve_free(self, v: np.ndarray) -> np.ndarray:
         """The preconditioner's inverse on ``v`` (n_free, 3); returns shape (n_free, 3).
 
-        The additive form's two solves are independent: the coarse one
+        The additive form's two solves are independent: from
+        :data:`CONCURRENT_FROM_VERTICES` free vertices the coarse one
         (:meth:`_coarse`) runs on a second thread while this one makes the
         fine back-solve (both release the GIL: Pardiso through ctypes, the
         compiled ``Aᵀ`` and ``A``), and the two are added as before, so the
@@ -996,7 +1004,10 @@ class TwoLevelModel:
         if self.fallback is not None:
             return fine(v)
         if not self.balancing:
-            z, c = self._coarse_beside(flat, lambda: fine(v))
+            if len(self.solver.free) >= CONCURRENT_FROM_VERTICES:
+                z, c = self._coarse_beside(flat, lambda: fine(v))
+            else:
+                z, c = fine(v), self._coarse(flat)
             return z + c.reshape(v.shape)
         c = self._coarse(flat)
         z = fine((flat - self._model(c)).reshape(v.shape)).reshape(-1)

@@ -227,19 +227,34 @@ def test_left_out_motions_leave_the_coarse_system_sound(patch):
     assert np.linalg.norm(Ac @ y - restricted) <= 1e-5 * np.linalg.norm(restricted)
 
 
-def test_the_additive_solve_adds_the_coarse_thread_to_the_fine_back_solve(patch):
+@pytest.mark.parametrize("beside", [True, False], ids=["on a second thread", "in turn"])
+def test_the_additive_solve_adds_the_coarse_solve_to_the_fine_back_solve(
+    patch, monkeypatch, beside
+):
+    if beside:
+        # this small patch is below the size from which the coarse solve has its thread
+        monkeypatch.setattr(twolevel, "CONCURRENT_FROM_VERTICES", 0)
+    threads = []
+    beside_of = twolevel.TwoLevelModel._coarse_beside
+    monkeypatch.setattr(
+        twolevel.TwoLevelModel,
+        "_coarse_beside",
+        lambda self, v, work: threads.append(1) or beside_of(self, v, work),
+    )
     ls = patch.solver
     state, _, _ = ls.local(patch.initial_guess())
     model = twolevel.TwoLevelModel(ls, bending=True)
     model.refresh(state, 1)
     assert model.fallback is None  # the two-level solve, not P's alone
     v = np.random.default_rng(5).standard_normal((len(ls.free), 3))
-    # the coarse solve made on its own thread: the same floats as one after the other
+    # the coarse solve made on its own thread or after the fine one: the same floats
     expected = ls.factor.solve_free(v) + model._coarse(v.reshape(-1)).reshape(v.shape)
     np.testing.assert_array_equal(model.solve_free(v), expected)
+    assert bool(threads) == beside
 
 
 def test_an_error_in_the_coarse_thread_is_raised_in_the_caller(patch, monkeypatch):
+    monkeypatch.setattr(twolevel, "CONCURRENT_FROM_VERTICES", 0)
     ls = patch.solver
     state, _, _ = ls.local(patch.initial_guess())
     model = twolevel.TwoLevelModel(ls)
