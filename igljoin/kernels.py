@@ -802,17 +802,19 @@ def join_rows(n, free, x, fixed, bc):  # pragma: no cover - compiled
     ``bc`` (len(fixed), 3); rows in neither are left unset.
     """
     X = np.empty((n, 3))
-    for k in range(free.shape[0]):
-        r = free[k]
-        X[r, 0] = x[k, 0]
-        X[r, 1] = x[k, 1]
-        X[r, 2] = x[k, 2]
-    for k in range(fixed.shape[0]):
-        r = fixed[k]
-        X[r, 0] = bc[k, 0]
-        X[r, 1] = bc[k, 1]
-        X[r, 2] = bc[k, 2]
+    _place_rows(X, free, x)
+    _place_rows(X, fixed, bc)
     return X
+
+
+@nb.njit(cache=True, inline="always")
+def _place_rows(X, rows, values):  # pragma: no cover - compiled
+    """``X[rows] = values`` for ``X`` (n, 3) and ``values`` (len(rows), 3)."""
+    for k in range(rows.shape[0]):
+        r = rows[k]
+        X[r, 0] = values[k, 0]
+        X[r, 1] = values[k, 1]
+        X[r, 2] = values[k, 2]
 
 
 @nb.njit(cache=True)

@@ -563,7 +563,7 @@ def test_a_re_solve_along_a_path_starts_with_the_quasi_newton_pairs_before(patch
 
 def test_a_re_solve_along_a_path_starts_its_rotation_fit_from_the_step_before(patch, monkeypatch):
     """The second step of a path fits its first rotations from the first step's last ones,
-    turned as its start was turned; it ends where a fit from no hint ends."""
+    turned as its seam turns onto the new targets; it ends where a fit from no hint ends."""
     from igljoin.solve import LocalGlobalSolver
 
     given, ended = [], []
