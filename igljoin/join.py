@@ -585,7 +585,7 @@ class JoinSolver:
         )
         if model is not None:
             result.coarse_model = {
-                "in_use": model.fallback is None,
+                "in_use": model.fallback is None and model.coarse_factor is not None,
                 "builds": int(run.stats["model_builds"]),
                 "fallback": model.fallback,
             }

@@ -99,6 +99,7 @@ import weakref
 import igl
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse import get_index_dtype
 
 from .errors import MissingExtraError, OptionsError, SolveError
 
@@ -312,7 +313,7 @@ def augmented_upper(S: sp.csr_matrix, Kt: sp.csr_matrix, d: np.ndarray) -> sp.cs
     arrays as :func:`_upper` of the assembled matrix when every diagonal
     entry of ``S`` is stored (:func:`_is_upper` is then true of the result;
     :class:`_Pardiso` converts it otherwise); at 100k guest vertices
-    0.1 s against 0.6 s.
+    0.08 s against 0.52 s.
 
     Parameters
     ----------
@@ -335,7 +336,7 @@ def augmented_upper(S: sp.csr_matrix, Kt: sp.csr_matrix, d: np.ndarray) -> sp.cs
     k_count = np.diff(Kt.indptr)
     total = int(s_count.sum() + Kt.nnz + r)
     # the index type scipy keeps (and LP64 Pardiso reads): no copy of the largest arrays
-    index = np.int32 if max(total, m + r) < 2**31 else np.int64
+    index = get_index_dtype(maxval=max(total, m + r))
     indptr = np.zeros(m + r + 1, dtype=index)
     np.cumsum(np.r_[s_count + k_count, np.ones(r, dtype=np.int64)], out=indptr[1:])
     data = np.empty(total)

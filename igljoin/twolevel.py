@@ -35,8 +35,10 @@ descent directions and the line search keeps the energy from rising.
 
 from __future__ import annotations
 
-import threading
+import functools
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import scipy.sparse as sp
@@ -94,10 +96,12 @@ SPANNED_BENDING = 1e-12
 _BENDING_VERTICES = 6
 
 #: Free vertices from which the additive form's coarse solve runs on a second thread beside
-#: the fine back-solve: a thread per solve costs ~0.3 ms, which at the paper's size made the
-#: explicit "two-level" join 1.25-1.5x slower (the longer patch 112 -> 172 ms); at 40k (a
-#: tube: 32.2 against 32.7 ms a solve) the two were even, at 100k the back-solves took 0.7x.
-CONCURRENT_FROM_VERTICES = 40_000
+#: the fine back-solve. Measured with the worker kept (quiet machine, medians of three to
+#: five alternated solves, the same iterations): at the paper's size the explicit
+#: "two-level" join took 1.11x (the longer patch, 120 against 108 ms) and 1.06x (e2e equal)
+#: the time of the solves one after the other; the default join at 24k 0.89x (patch, 1.13
+#: against 1.27 s) and 0.88x (tube, 8.4 against 9.5 s); the 100k patch's back-solves 0.7x.
+CONCURRENT_FROM_VERTICES = 20_000
 
 #: Largest number of entries the model may hold (:attr:`TwoLevelModel.model_entries`: the
 #: coarse system, :attr:`TwoLevelModel.coarse_entries`, the operators' cluster patterns and
@@ -128,6 +132,16 @@ _BYTES_PER_ENTRY = 50
 # (an augmented system) instead of being assembled into A_c, where each row would
 # couple all its clusters' pairs
 _WIDE_CLUSTERS = 8
+
+
+@functools.lru_cache(maxsize=1)
+def _coarse_worker() -> ThreadPoolExecutor:
+    """The one thread the additive coarse solves run on (:meth:`TwoLevelModel.solve_free`)."""
+    return ThreadPoolExecutor(max_workers=1, thread_name_prefix="igljoin-coarse-solve")
+
+
+# a forked child has none of its parent's threads: it starts its own worker
+os.register_at_fork(after_in_child=_coarse_worker.cache_clear)
 
 
 class _CoarseAugmented(AugmentedQuadratic):
@@ -953,27 +967,20 @@ class TwoLevelModel:
         """``(work(), A A_c⁻¹ Aᵀ v)``, the second made on another thread while ``work`` runs.
 
         ``work`` (the fine back-solve) runs in this thread; :meth:`_coarse` of
-        ``v`` (3 n_free,) on a second one. Both results are returned once both
-        have finished; an exception in either is raised here, after the
-        coarse thread has finished.
+        ``v`` (3 n_free,) on the coarse solves' worker thread (one for the
+        process, started on first use: handing it a solve costs ~10 µs,
+        starting a thread per solve ~0.5 ms). Both results are returned once
+        both have finished; an exception in either is raised here, after the
+        coarse solve has finished.
         """
-        box = []
-
-        def coarse():
-            try:
-                box.append(self._coarse(v))
-            except BaseException as exc:  # raised in the caller's thread below
-                box.append(exc)
-
-        worker = threading.Thread(target=coarse, name="igljoin-coarse-solve", daemon=True)
-        worker.start()
+        coarse = _coarse_worker().submit(self._coarse, v)
         try:
             z = work()
         finally:
-            worker.join()
-        if isinstance(box[0], BaseException):
-            raise box[0]
-        return z, box[0]
+            done = coarse.exception()  # waits for it
+        if done is not None:
+            raise done
+        return z, coarse.result()
 
     def _model(self, v: np.ndarray) -> np.ndarray:
         """``H_ff v`` for ``v`` of shape (3 n_free,), from the factored model."""

@@ -621,6 +621,8 @@ def test_pairs_larger_than_the_limit_are_not_kept(patch, monkeypatch):
     step2 = solver.solve(_turned(T0, 2), start=step1)
     assert step2.converged and np.array_equal(solver._kept[-1].X, step2.guest.V)
     assert solver._kept[-1].memory is None and solver.last_run.memory is None
+    # the rotations (9n' floats, far fewer than the pairs) are kept all the same
+    assert solver._kept[-1].rotations is not None
     monkeypatch.setattr(join_module, "PAIRS_MAX_BYTES", size)
     solver.solve(_turned(T0, 3), start=step2)
     assert solver._kept[-1].memory is not None

@@ -1,5 +1,7 @@
 """The two-level preconditioner: P plus a coarse Gauss–Newton correction (igljoin.twolevel)."""
 
+import multiprocessing
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -526,3 +528,28 @@ def test_a_kept_model_whose_rebuild_failed_is_dropped(monkeypatch):
     again = solver.solve()
     assert solver.last_model is not model and again.converged
     assert solver.last_run.stats["model_builds"] == solver.last_model.factorizations == 1
+
+
+_FORKED = {}
+
+
+def _coarse_solve_in_child():
+    model, v = _FORKED["model"], _FORKED["v"]
+    return model.solve_free(v)
+
+
+def test_a_forked_child_starts_its_own_coarse_worker(patch, monkeypatch):
+    # the parent's worker thread does not exist in a forked child (a pipeline's worker
+    # processes): the child's coarse solve must start its own rather than wait for it
+    monkeypatch.setattr(twolevel, "CONCURRENT_FROM_VERTICES", 0)
+    ls = patch.solver
+    state, _, _ = ls.local(patch.initial_guess())
+    model = twolevel.TwoLevelModel(ls)
+    model.refresh(state, 1)
+    v = np.random.default_rng(7).standard_normal((len(ls.free), 3))
+    here = model.solve_free(v)  # the parent's worker is running now
+    _FORKED.update(model=model, v=v)
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        # 60 s: the solve takes milliseconds; a child waiting on a missing thread never ends
+        there = pool.apply_async(_coarse_solve_in_child).get(timeout=60)
+    np.testing.assert_array_equal(there, here)
