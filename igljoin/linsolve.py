@@ -120,6 +120,9 @@ BACKENDS = ("auto", "igl", "cholespy", "pardiso")
 #: installed (the measured crossing: see the module docstring).
 PARDISO_FROM_NNZ = 10_000_000
 
+# the largest index (and entry count) LP64 Pardiso's 32-bit integers hold
+_LP64_MAX = 2**31 - 1
+
 _NOT_FACTORED = (
     "the deformation system could not be factored (a part of the guest is not held by any "
     "term); check that every guest component touches the seam"
@@ -391,6 +394,13 @@ class _Pardiso:
         self.lib, self.itype = _mkl_rt()
         self.mtype = -2 if indefinite else 2
         U = A if _is_upper(A) else _upper(A)
+        if self.itype is np.int32 and max(U.nnz, U.shape[0]) > _LP64_MAX:
+            # the indices would wrap when cast to Pardiso's 32-bit integers
+            raise SolveError(
+                f"the system to factor has {U.nnz:,} stored entries, more than MKL Pardiso's "
+                f"32-bit (LP64) indices address ({_LP64_MAX:,}); join a coarser guest "
+                "(igljoin.resample) or use linear_solver='cholespy'"
+            )
         self.n = U.shape[0]
         self.a = np.ascontiguousarray(U.data, dtype=np.float64)
         self.ia = np.ascontiguousarray(U.indptr, dtype=self.itype)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+import igljoin
 from igljoin import linsolve
 
 
@@ -77,3 +78,17 @@ def test_pardiso_factors_the_placed_triangle_as_the_assembled_matrix():
     # and a solve of the system (its LDLᵀ residual at rounding, 1e-10 far above it for
     # this well-conditioned matrix)
     assert np.linalg.norm(A @ placed.solve(b) - b) <= 1e-10 * np.linalg.norm(b)
+
+
+@pytest.mark.skipif(
+    "pardiso" not in linsolve.available_backends(), reason="mkl (igljoin[pardiso]) missing"
+)
+def test_a_system_past_pardisos_32_bit_indices_is_refused(monkeypatch):
+    # the limit lowered to stand in for a system of more than 2**31 entries (tens of GB)
+    S, Kt, d, A = _parts(8)
+    U = linsolve.augmented_upper(S, Kt, d)
+    monkeypatch.setattr(linsolve, "_LP64_MAX", U.nnz - 1)
+    with pytest.raises(igljoin.SolveError, match="32-bit.*linear_solver='cholespy'"):
+        linsolve._Pardiso(U, indefinite=True)
+    monkeypatch.setattr(linsolve, "_LP64_MAX", U.nnz)
+    assert linsolve._Pardiso(U, indefinite=True).n == U.shape[0]
