@@ -155,12 +155,12 @@ class RestMeasures:
         """
         return {name: dict(value) for name, value in self._kept(key, make).items()}
 
-    def curve_faces(self, seam: SeamGeometry) -> metrics.CurveFaces:
-        """:func:`igljoin.metrics.curve_faces` of ``seam`` (its guest's faces at the curve)."""
+    def guest_curve_faces(self, seam: SeamGeometry) -> metrics.CurveFaces:
+        """:func:`igljoin.metrics.guest_curve_faces` of ``seam`` (its guest's faces there)."""
         # the host is rigid through a solver's life, so its curve's points and tangents (which
         # the kept faces hold) are fixed by the curve's indices
         key = ("curve faces", seam.guest_at_host.tobytes(), seam.host_curve.tobytes(), seam.closed)
-        return self._kept(key, lambda: metrics.curve_faces(seam))
+        return self._kept(key, lambda: metrics.guest_curve_faces(seam))
 
     @property
     def areas(self) -> np.ndarray:
@@ -314,7 +314,7 @@ def join_result(
             ),
         )
         onering = metrics.crease_angles(
-            geometry, host_values.inward(hc), guest_faces=rest.curve_faces(geometry)
+            geometry, host_values.inward(hc), guest_faces=rest.guest_curve_faces(geometry)
         )
         measured_all.append(measured)
         inputs_all.append(inputs)

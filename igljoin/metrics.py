@@ -59,7 +59,7 @@ __all__ = [
     "rigid_reference",
     "RigidReference",
     "crease_angles",
-    "curve_faces",
+    "guest_curve_faces",
     "CurveFaces",
     "edge_dihedral_angles",
     "host_dihedral_angles",
@@ -263,7 +263,7 @@ def crease_angles(
         (:func:`igljoin.frames.seam_frames`), if already made (a solver keeps
         them for its rigid host).
     guest_faces : CurveFaces, optional
-        ``curve_faces(seam)`` of a guest with the same faces and curve, if
+        ``guest_curve_faces(seam)`` of a guest with the same faces and curve, if
         already made (a solver keeps its rest guest's): the guest's one-ring
         frames (:func:`igljoin.frames.curve_frames`) then measure only what
         moves.
@@ -274,13 +274,13 @@ def crease_angles(
     """
     if host_inward is None:
         host_inward = seam_frames(seam.Vh, seam.Fh, seam.host_curve, seam.closed).inward
-    kept = curve_faces(seam) if guest_faces is None else guest_faces
+    kept = guest_curve_faces(seam) if guest_faces is None else guest_faces
     guest = frames.curve_frames(seam.Vg, kept).inward
     cos = np.einsum("ij,ij->i", guest, -host_inward)
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 
-def curve_faces(seam: SeamGeometry) -> CurveFaces:
+def guest_curve_faces(seam: SeamGeometry) -> CurveFaces:
     """:func:`igljoin.frames.curve_faces` of the guest of ``seam`` along its curve.
 
     The guest's faces at the curve, their incidence and the host curve's

@@ -686,7 +686,7 @@ def test_kept_curve_faces_give_the_frames_at_other_positions(joins):
     for _, res in joins.values():
         seam = _seam_geometry(res)
         sm = res.seams[0]
-        kept = metrics.curve_faces(seam)
+        kept = metrics.guest_curve_faces(seam)
         host = frames.curve_faces(
             res.host.F, sm.host_curve, len(res.host.V), seam.host_points, sm.closed, radius=2.0
         )
@@ -718,7 +718,7 @@ def test_kept_curve_faces_of_faces_repeating_a_vertex():
     V = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
     F = np.array([[0, 1, 2], [0, 2, 3], [0, 0, 3]])  # the last face repeats vertex 0
     seam = SeamGeometry(V, F[:2], [0, 1], V, F, [0, 1], False)
-    kept = metrics.curve_faces(seam)
+    kept = metrics.guest_curve_faces(seam)
     assert kept.incidence[0, 2] == 2.0  # vertex 0 twice in the last face
     host_inward = _ref_seam_frames(V, F[:2], [0, 1], False).inward
     lifted = V + np.array([0.0, 0.0, 0.3]) * V[:, [1]]  # the faces no longer flat
