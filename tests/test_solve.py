@@ -524,6 +524,18 @@ def test_a_path_is_not_cut_by_solves_that_are_not_on_it(patch):
     assert e(predicted) - e_min < 1e-2 * (e(plain) - e_min)
 
 
+def _first_slider_step(patch, monkeypatch, spy):
+    """A solver whose runs go through ``spy``, solved cold and then warm after a 1° turn of
+    its targets (from a cold result: no path yet); the solver, the first targets, the step."""
+    from igljoin.solve import LocalGlobalSolver
+
+    monkeypatch.setattr(LocalGlobalSolver, "run", spy)
+    solver = _solver(patch)
+    first = solver.solve()
+    T0 = first.seam_targets
+    return solver, T0, solver.solve(_turned(T0, 1), start=first)
+
+
 def test_a_re_solve_along_a_path_starts_with_the_quasi_newton_pairs_before(patch, monkeypatch):
     """The second step of a path starts with the first step's pairs; they are copied."""
     from igljoin.solve import LocalGlobalSolver
@@ -539,11 +551,7 @@ def test_a_re_solve_along_a_path_starts_with_the_quasi_newton_pairs_before(patch
             assert np.array_equal(memory.S, given[-1][1])
         return out
 
-    monkeypatch.setattr(LocalGlobalSolver, "run", spy)
-    solver = _solver(patch)
-    first = solver.solve()
-    T0 = first.seam_targets
-    step1 = solver.solve(_turned(T0, 1), start=first)  # from a cold result: no path yet
+    solver, T0, step1 = _first_slider_step(patch, monkeypatch, spy)
     pairs = solver.last_run.memory
     step2 = solver.solve(_turned(T0, 2), start=step1)
     step3 = solver.solve(_turned(T0, 3), start=step2)
@@ -575,11 +583,7 @@ def test_a_re_solve_along_a_path_starts_its_rotation_fit_from_the_step_before(pa
         ended.append(out.rotations)
         return out
 
-    monkeypatch.setattr(LocalGlobalSolver, "run", spy)
-    solver = _solver(patch)
-    first = solver.solve()
-    T0 = first.seam_targets
-    step1 = solver.solve(_turned(T0, 1), start=first)  # from a cold result: no path yet
+    solver, T0, step1 = _first_slider_step(patch, monkeypatch, spy)
     T2 = _turned(T0, 2)
     step2 = solver.solve(T2, start=step1)
     assert given[0] is None and given[1] is None

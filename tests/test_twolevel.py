@@ -229,6 +229,15 @@ def test_left_out_motions_leave_the_coarse_system_sound(patch):
     assert np.linalg.norm(Ac @ y - restricted) <= 1e-5 * np.linalg.norm(restricted)
 
 
+def _built(patch, **options):
+    """The patch's iteration and its two-level model built at the start."""
+    ls = patch.solver
+    state, _, _ = ls.local(patch.initial_guess())
+    model = twolevel.TwoLevelModel(ls, **options)
+    model.refresh(state, 1)
+    return ls, model
+
+
 @pytest.mark.parametrize("beside", [True, False], ids=["on a second thread", "in turn"])
 def test_the_additive_solve_adds_the_coarse_solve_to_the_fine_back_solve(
     patch, monkeypatch, beside
@@ -243,10 +252,7 @@ def test_the_additive_solve_adds_the_coarse_solve_to_the_fine_back_solve(
         "_coarse_beside",
         lambda self, v, work: threads.append(1) or beside_of(self, v, work),
     )
-    ls = patch.solver
-    state, _, _ = ls.local(patch.initial_guess())
-    model = twolevel.TwoLevelModel(ls, bending=True)
-    model.refresh(state, 1)
+    ls, model = _built(patch, bending=True)
     assert model.fallback is None  # the two-level solve, not P's alone
     v = np.random.default_rng(5).standard_normal((len(ls.free), 3))
     # the coarse solve made on its own thread or after the fine one: the same floats
@@ -257,10 +263,7 @@ def test_the_additive_solve_adds_the_coarse_solve_to_the_fine_back_solve(
 
 def test_an_error_in_the_coarse_thread_is_raised_in_the_caller(patch, monkeypatch):
     monkeypatch.setattr(twolevel, "CONCURRENT_FROM_VERTICES", 0)
-    ls = patch.solver
-    state, _, _ = ls.local(patch.initial_guess())
-    model = twolevel.TwoLevelModel(ls)
-    model.refresh(state, 1)
+    ls, model = _built(patch)
 
     def broken(v):
         raise FloatingPointError("coarse solve failed")
@@ -542,10 +545,7 @@ def test_a_forked_child_starts_its_own_coarse_worker(patch, monkeypatch):
     # the parent's worker thread does not exist in a forked child (a pipeline's worker
     # processes): the child's coarse solve must start its own rather than wait for it
     monkeypatch.setattr(twolevel, "CONCURRENT_FROM_VERTICES", 0)
-    ls = patch.solver
-    state, _, _ = ls.local(patch.initial_guess())
-    model = twolevel.TwoLevelModel(ls)
-    model.refresh(state, 1)
+    ls, model = _built(patch)
     v = np.random.default_rng(7).standard_normal((len(ls.free), 3))
     here = model.solve_free(v)  # the parent's worker is running now
     _FORKED.update(model=model, v=v)
