@@ -484,8 +484,8 @@ class JoinSolver:
             smoothly, after a prediction from the earlier results when the
             start ends a path of re-solves (:meth:`warm_start`; the
             iteration then also starts with the quasi-Newton pairs and the
-            rotations of the step before). A start at the minimum stops after one or two
-            iterations.
+            rotations of the step before). A start at the minimum stops
+            after one or two iterations.
         progress : callable, optional
             Called with a :class:`SolveProgress` after every iteration (for
             a progress display of long solves; it should return quickly).

@@ -115,9 +115,10 @@ def _smooth_rows(term: SmoothJoinTerm, state: LocalState) -> tuple:
     if term.mode == "paper":
         return _unit_rows(term)
     k = term.K.shape[0]
-    r = term.applied(state) - term.target(state)
+    applied = term.applied(state)
+    r = applied - term.target(state)
     size = np.linalg.norm(r, axis=1)
-    scale = np.linalg.norm(term.applied(state), axis=1)
+    scale = np.linalg.norm(applied, axis=1)
     moved = size > 1e-12 * np.maximum(scale, 1e-300)
     m = np.where(moved[:, None], r / np.where(moved, size, 1.0)[:, None], term.normal)
     # a row exactly on a face: the face's normal; exactly inside a wedge: nothing

@@ -597,10 +597,9 @@ class TwoLevelModel:
         self.labels = None
         self.left_out = np.zeros(0, dtype=np.int64)
         self._cache = {}
-        # set at the first build: the free vertices' clusters by vertex (-1 fixed) and their
-        # rows in the motions, per term its operators' cluster patterns and whether it is
-        # kept apart, the blocks of A_c; at every build the motions (n_free, 3, w)
-        self._vertex_labels = None
+        # set at the first build: the free vertices' rows in the motions, per term its
+        # operators' cluster patterns and whether it is kept apart, the blocks of A_c; at
+        # every build the motions (n_free, 3, w)
         self._where = None
         self._wide = None
         self._patterns = None
@@ -683,12 +682,12 @@ class TwoLevelModel:
             # other terms' block connects the mesh just as well
             graph = ls.factor.Qff if ls.wide is None else ls.factor.Sff
             self.labels = clusters(X, graph, self.cluster_size)
-            self._vertex_labels = np.full(ls.n, -1, dtype=np.int64)
-            self._vertex_labels[ls.free] = self.labels
+            vertex_labels = np.full(ls.n, -1, dtype=np.int64)
+            vertex_labels[ls.free] = self.labels
             self._where = np.full(ls.n, -1, dtype=np.int64)
             self._where[ls.free] = np.arange(len(ls.free))
             self._clusters = int(self.labels.max()) + 1
-            self._wide = self._count(self._clusters, 9 if self.bending else 6)
+            self._wide = self._count(self._clusters, 9 if self.bending else 6, vertex_labels)
         if self.model_entries > self._limit()[1]:
             # at every build (a model refused before is refused again), before any is made
             self.seconds["clusters"] += time.perf_counter() - t0
@@ -733,30 +732,32 @@ class TwoLevelModel:
             # the values, not the set-up, failed: a later solve makes a new model
             self.unsound = True
             self.motions = self.factors = None
-            self.seconds["factor"] += time.perf_counter() - t3
-            self.seconds["clusters"] += t1 - t0
-            self.seconds["model"] += model
-            self.seconds["coarse"] += t3 - t1 - model
+            self._book(t1 - t0, t3 - t1, model, time.perf_counter() - t3)
             return False
         self.factorizations += 1
         self.built_at.append(int(iteration))
         if state.rotations is not None:
             self.built_rotations = state.rotations[ls.free].copy()
-        t4 = time.perf_counter()
-        self.seconds["clusters"] += t1 - t0
-        # the model's values (and the balancing form's factors) apart from the projection
-        self.seconds["coarse"] += t3 - t1 - model
-        self.seconds["model"] += model
-        self.seconds["factor"] += t4 - t3
+        self._book(t1 - t0, t3 - t1, model, time.perf_counter() - t3)
         return first
+
+    def _book(self, clusters: float, coarse: float, model: float, factor: float) -> None:
+        """Add a build's seconds to :attr:`seconds`: ``coarse`` includes ``model`` (the
+        model's values and the balancing form's factors), booked apart from the projection."""
+        self.seconds["clusters"] += clusters
+        self.seconds["coarse"] += coarse - model
+        self.seconds["model"] += model
+        self.seconds["factor"] += factor
 
     def _augmented(self) -> bool:
         """Whether wide terms may be kept apart (the augmented system needs Pardiso)."""
         ls = self.solver
         return ls.linear_solver in ("auto", "pardiso") and "pardiso" in available_backends()
 
-    def _count(self, a: int, w: int) -> list:
+    def _count(self, a: int, w: int, vertex_labels: np.ndarray) -> list:
         """Which terms are wide; finds the patterns and counts the entries the model will hold.
+
+        ``vertex_labels`` (n,) gives every vertex's cluster (-1 for a fixed one).
 
         Only the operators' patterns and the clusters are read: every row of a
         term's operator ``K`` (and of the Laplacian ``L`` of a rotation-aware
@@ -777,13 +778,13 @@ class TwoLevelModel:
         self._patterns = []
         for term in self.solver.terms:
             K = sp.csr_matrix(term.K)
-            of_K = ck.row_clusters(K.indptr, K.indices, self._vertex_labels, 1)
+            of_K = ck.row_clusters(K.indptr, K.indices, vertex_labels, 1)
             of_L = None
             reach, count = len(of_K[1]), K.shape[0]
             operators += K.nnz
             if isinstance(term, ShapeTerm) and term.rotation_aware:
                 (Lptr, Lind, _), *_ = rotation_pattern(term, self._cache)
-                of_L = ck.row_clusters(Lptr, Lind, self._vertex_labels, 1)
+                of_L = ck.row_clusters(Lptr, Lind, vertex_labels, 1)
                 reach, count = reach + len(of_L[1]), count + len(Lptr) - 1
                 operators += len(Lind)
             # the eliminated rotations' factor enters with a minus sign: never kept apart
