@@ -963,3 +963,12 @@ def test_a_re_solves_whole_result_equals_a_fresh_solvers(key):
     assert all(r.iterations > 1 for r in results)  # the re-solves really iterate
     for got, want in zip([first, *results], [fresh[0], *fresh]):
         assert _everything(got) == _everything(want)
+    # a step along the path (its start predicted from the step before, its iteration started
+    # with that step's quasi-Newton pairs and rotations) reaches the cold solve's minimum
+    kept = solver._kept_at(results[2].guest.V)
+    assert kept.earlier and kept.memory is not None and kept.rotations is not None
+    T2 = _resolve_targets(first.seam_targets, 4.0)
+    along, cold = solver.solve(T2, start=results[2]), solver.solve(T2)
+    assert along.converged and cold.converged
+    # 1e-6: the solver's promise against a long plain run; both stop within it of the minimum
+    assert abs(along.energy[-1] - cold.energy[-1]) <= 1e-6 * cold.energy[-1]
