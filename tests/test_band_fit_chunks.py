@@ -97,8 +97,7 @@ def _padded_fit_rows(X, w):
     """The fit's rows solved over every band vertex, the padding's included (the solve the
     fit made before it left out the band vertices of weight 0)."""
     XtW, H = bandfit._normal_equations(X, w)
-    ridge = 1e-8 * np.maximum(np.trace(H, axis1=1, axis2=2), 1e-12)[:, None, None]
-    return np.linalg.solve(H + ridge * np.eye(H.shape[1]), XtW)
+    return np.linalg.solve(bandfit._ridged(H), XtW)
 
 
 def _assert_same(a, b):
@@ -267,11 +266,21 @@ def test_the_fits_memory_does_not_grow_with_curve_times_band(fit_cases, monkeypa
 
 
 @pytest.mark.parametrize("M, most", [(1, 0), (2, 1), (3, 2), (40, 20), (40, 39)])
-def test_the_rows_solved_without_the_weightless_band_vertices_are_the_padded_rows(M, most):
+def test_the_rows_solved_without_the_weightless_band_vertices_are_the_padded_rows(
+    M, most, monkeypatch
+):
     # rows with no, one and up to ``most`` band vertices weighted, anywhere in the row:
-    # where the weighted are few enough the fit solves for them only (two columns at
-    # least), otherwise over every column; each row of Z must be the one the solve over
-    # all M columns gives, zeros elsewhere
+    # the fit solves for them only (two columns at least) — here whatever their share of
+    # the row, so that every case but a single column takes that path — and each row of Z
+    # must be the one the solve over all M columns gives, zeros elsewhere
+    monkeypatch.setattr(bandfit, "_COMPACT_WIDTH", 1.0)
+    compact = []
+    weighted = bandfit._weighted_normal_equations
+    monkeypatch.setattr(
+        bandfit,
+        "_weighted_normal_equations",
+        lambda *a: compact.append(1) or weighted(*a),
+    )
     rng = np.random.default_rng(M + most)
     k = 60
     u, v = rng.uniform(-1.0, 1.0, (2, k, M))
@@ -283,3 +292,4 @@ def test_the_rows_solved_without_the_weightless_band_vertices_are_the_padded_row
     Z = bandfit._fit_rows(X, w)
     _assert_same(Z, _padded_fit_rows(X, w))
     assert (Z[np.broadcast_to(~present[:, None, :], Z.shape)] == 0).all()
+    assert bool(compact) == (M >= 2)  # a single column is solved as it is

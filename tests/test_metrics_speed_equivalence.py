@@ -661,6 +661,9 @@ def test_compiled_band_fit_columns_and_sums_are_the_einsums(joins, key, monkeypa
     fast = [bandfit.band_fit(V, F, curve, sm.closed, band) for V, F, curve in cases]
     monkeypatch.setattr(bandfit, "_columns", _ref_columns)
     monkeypatch.setattr(bandfit, "_normal_equations", _ref_normal_equations)
+    # the reference solves over every column (the fast fit leaves out weightless ones where
+    # they are many, as on the end-to-end samples)
+    monkeypatch.setattr(bandfit, "_COMPACT_WIDTH", -1.0)
     for (V, F, curve), a in zip(cases, fast):
         b = bandfit.band_fit(V, F, curve, sm.closed, band)
         _assert_same(a.counts, b.counts)
