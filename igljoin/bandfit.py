@@ -371,6 +371,7 @@ def band_fit(
         pulled[sl] = np.einsum("km,kmj->kj", np.where(valid, 1.0, 0.0), VNb)
         if len(chunks) == 1:
             kept = idx, valid
+    found = None  # the whole curve's lists, no longer needed
     n0 = unit(pulled + n0)
     del pulled
     g0 = unit(np.cross(n0, T))

@@ -96,7 +96,7 @@ class _Kept:
     X: np.ndarray
     earlier: tuple
     memory: QuasiNewtonMemory | None
-    rotations: np.ndarray | None = None
+    rotations: np.ndarray | None
 
 
 def _guest_mesh(guest: Any) -> Mesh:

@@ -221,6 +221,7 @@ def test_stretch_term_reads_the_edge_vectors_the_shape_term_left(tube, monkeypat
     solver = _solver(tube)
     shape, stretch = solver.terms[0], solver.terms[1]
     assert shape.E is stretch.E  # the cache is keyed by the edge array: one array for both
+    assert shape.compiled  # the compiled step is the one that leaves the edge vectors
     X = _perturbed(solver, 0.3, 8)
     shared = LocalState(X)
     shape.local_into(shared, np.zeros_like(X))
