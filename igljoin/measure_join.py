@@ -18,9 +18,9 @@ import numpy as np
 
 from . import crease, metrics
 from .bandfit import BandFit, band_fit
-from .correspond import Correspondence
+from .correspond import Correspondence, RigidReference, rigid_reference
 from .crease import CreaseMeasure
-from .frames import face_areas, face_normals_areas
+from .frames import CurveFaces, face_areas, face_normals_areas
 from .host_values import HostValues
 from .join_terms import JoinTerms, join_angles
 from .measure import combined_gap
@@ -155,7 +155,7 @@ class RestMeasures:
         """
         return {name: dict(value) for name, value in self._kept(key, make).items()}
 
-    def guest_curve_faces(self, seam: SeamGeometry) -> metrics.CurveFaces:
+    def guest_curve_faces(self, seam: SeamGeometry) -> CurveFaces:
         """:func:`igljoin.metrics.guest_curve_faces` of ``seam`` (its guest's faces there)."""
         # the host is rigid through a solver's life, so its curve's points and tangents (which
         # the kept faces hold) are fixed by the curve's indices
@@ -182,9 +182,10 @@ class RestMeasures:
         return self._kept(("incidence",), lambda: metrics.vertex_incidence(self.E, n))
 
     @property
-    def rigid(self) -> metrics.RigidReference:
-        """The rest side of the rigid fit (:func:`igljoin.metrics.rigid_reference`)."""
-        return self._kept(("rigid",), lambda: metrics.rigid_reference(self.corr.V))
+    def rigid(self) -> RigidReference:
+        """The rest side of the rigid fit of the non-rigid displacement
+        (:func:`igljoin.correspond.rigid_reference`)."""
+        return self._kept(("rigid",), lambda: rigid_reference(self.corr.V))
 
     def rest_guest(self) -> Mesh:
         """The rest guest as a :class:`Mesh` named "rest guest", made of read-only views.

@@ -56,11 +56,8 @@ __all__ = [
     "vertex_incidence",
     "VertexIncidence",
     "nonrigid_displacement",
-    "rigid_reference",
-    "RigidReference",
     "crease_angles",
     "guest_curve_faces",
-    "CurveFaces",
     "edge_dihedral_angles",
     "host_dihedral_angles",
     "ring_band",
@@ -222,8 +219,8 @@ def nonrigid_displacement(
     V0, V1 : ndarray, shape (n, 3)
         Rest and deformed positions.
     rest : RigidReference, optional
-        ``rigid_reference(V0)``, if already made (a solver keeps its rest
-        guest's).
+        :func:`igljoin.correspond.rigid_reference` of ``V0`` (float64), if
+        already made (a solver keeps its rest guest's).
 
     Returns
     -------
@@ -232,17 +229,8 @@ def nonrigid_displacement(
     """
     V0 = np.asarray(V0, dtype=np.float64)
     V1 = np.asarray(V1, dtype=np.float64)
-    R, t = correspond.rigid_fit_to(rigid_reference(V0) if rest is None else rest, V1)
+    R, t = correspond.rigid_fit_to(correspond.rigid_reference(V0) if rest is None else rest, V1)
     return _row_norms(np.ascontiguousarray((V1 - (V0 @ R.T + t)).T))
-
-
-def rigid_reference(V0: np.ndarray) -> RigidReference:
-    """The rest side of the rigid fit of :func:`nonrigid_displacement`.
-
-    :func:`igljoin.correspond.rigid_reference` of the rest positions ``V0``
-    (n, 3) as float64, as :func:`nonrigid_displacement` fits them.
-    """
-    return correspond.rigid_reference(np.asarray(V0, dtype=np.float64))
 
 
 def crease_angles(

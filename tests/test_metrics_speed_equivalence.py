@@ -767,7 +767,7 @@ def test_kept_incidence_and_rigid_reference_give_the_plain_maps(joins):
         got = metrics.vertex_strain(E, broken, n, incidence=incidence)
         _assert_same(got, metrics.vertex_strain(E, broken, n))
         assert not np.array_equal(got, metrics.vertex_strain(E, strain, n), equal_nan=True)
-        rest = metrics.rigid_reference(V0)
+        rest = correspond.rigid_reference(np.asarray(V0, dtype=np.float64))
         # a mirror image: the best fit is a proper rotation, not the reflection
         for W in (V1, V1[::-1].copy(), V0, V1 * np.array([1.0, 1.0, -1.0])):
             R, t = _ref_rigid_fit(V0, W)
