@@ -45,6 +45,7 @@ from .terms import ROTATION_REGULARISATION, LocalState, ShapeTerm, SmoothJoinTer
 __all__ = [
     "gauss_newton",
     "gauss_newton_factors",
+    "factors_product",
     "factor_rows",
     "rotation_pattern",
     "row_directions",
@@ -231,6 +232,30 @@ def _rotation_matrix(term: ShapeTerm, values: np.ndarray, cache: dict) -> sp.csr
         cache[key] = _index_arrays(cols, indptr, (3 * n, 3 * n))
     cols, indptr = cache[key]
     return sp.csr_matrix((values, cols, indptr), shape=(3 * term.n, 3 * term.n))
+
+
+def factors_product(factors: list, free_dofs: np.ndarray, n: int, v: np.ndarray) -> np.ndarray:
+    """``H_ff v`` from :func:`gauss_newton_factors`' ``factors`` (``Σ s Jᵀ diag(w) J``).
+
+    Parameters
+    ----------
+    factors : list of (scipy.sparse matrix, ndarray, float)
+    free_dofs : ndarray of int64, shape (3 n_free,)
+        The free degrees of freedom (:func:`dofs` of the free vertices).
+    n : int
+        Vertices (the factors act on 3n degrees of freedom).
+    v : ndarray, shape (3 n_free,)
+
+    Returns
+    -------
+    ndarray, shape (3 n_free,)
+    """
+    full = np.zeros(3 * n)
+    full[free_dofs] = v
+    out = np.zeros_like(full)
+    for J, w, sign in factors:
+        out += sign * (J.T @ (w * (J @ full)))
+    return out[free_dofs]
 
 
 def gauss_newton_factors(terms: list, state: LocalState, n: int, cache: dict | None = None) -> list:

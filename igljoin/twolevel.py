@@ -51,6 +51,7 @@ from .newton import (
     dofs,
     factor_entries,
     factor_rows,
+    factors_product,
     gauss_newton_factors,
     rotation_pattern,
     row_directions,
@@ -985,12 +986,7 @@ class TwoLevelModel:
 
     def _model(self, v: np.ndarray) -> np.ndarray:
         """``H_ff v`` for ``v`` of shape (3 n_free,), from the factored model."""
-        full = np.zeros(3 * self.solver.n)
-        full[self.free_dofs] = v
-        out = np.zeros_like(full)
-        for J, w, sign in self.factors:
-            out += sign * (J.T @ (w * (J @ full)))
-        return out[self.free_dofs]
+        return factors_product(self.factors, self.free_dofs, self.solver.n, v)
 
     def solve_free(self, v: np.ndarray) -> np.ndarray:
         """The preconditioner's inverse on ``v`` (n_free, 3); returns shape (n_free, 3).
