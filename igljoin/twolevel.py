@@ -865,12 +865,11 @@ class TwoLevelModel:
         else the solver's backend. Pardiso's numeric phase alone on the first
         build's analysis (0.17 s at 40k) crashed inside MKL on a rebuild of a
         100k tube's coarse matrix, so every build is a whole factorization.
-        The crash is MKL's after a back-solve on fewer threads than the
-        factorization's (as every back-solve here is made, on one): the
-        numeric phase then ends in a segmentation fault on the augmented
-        systems too (reproduced on the 30k patch's fine system and the 100k
-        patch's coarse one), and not after back-solves on the factorization's
-        threads.
+        As observed on the 30k patch's fine system and the 100k patch's
+        coarse one (the crash itself was met on a 100k tube's), the numeric
+        phase ends in a segmentation fault after a back-solve made on fewer
+        threads than the factorization's (as every back-solve here is made,
+        on one), and not after back-solves on the factorization's threads.
         """
         ls = self.solver
         if U is not None:
@@ -994,8 +993,9 @@ class TwoLevelModel:
         The additive form's two solves are independent: from
         :data:`CONCURRENT_FROM_VERTICES` free vertices the coarse one
         (:meth:`_coarse`) runs on a second thread while this one makes the
-        fine back-solve (both release the GIL: Pardiso through ctypes, the
-        compiled ``Aᵀ`` and ``A``), and the two are added as before, so the
+        fine back-solve (the coarse side does not wait for the GIL whatever
+        the fine backend holds: Pardiso through ctypes, the compiled ``Aᵀ`` and
+        ``A`` without it), and the two are added as before, so the
         result is the same floats. On the 100k patch the fine back-solve
         takes ~60 ms and the coarse ~22 ms an iteration, one core each: the
         two together 64 against 90 ms one after the other, a join's

@@ -68,7 +68,8 @@ def test_the_clusters_graph_is_weighted_by_edge_length_without_its_diagonal(patc
 def test_grid_cells_are_numbered_as_the_rows_unique():
     rng = np.random.default_rng(4)
     small = rng.integers(0, 7, (500, 3))
-    # spans whose product passes 2⁶² take the rows' unique itself
+    # spans whose product passes 2⁶² take the rows' unique itself (that case checks only
+    # that such keys are sent there, not a second computation)
     huge = np.c_[rng.integers(0, 2**31, 500), rng.integers(0, 2**31, 500), small[:, 2]]
     for keys in (small, huge):
         _, expected = np.unique(keys, axis=0, return_inverse=True)
@@ -553,3 +554,15 @@ def test_a_forked_child_starts_its_own_coarse_worker(patch, monkeypatch):
         # 60 s: the solve takes milliseconds; a child waiting on a missing thread never ends
         there = pool.apply_async(_coarse_solve_in_child).get(timeout=60)
     np.testing.assert_array_equal(there, here)
+
+
+def test_a_tubes_clusters_keep_their_bending_motions():
+    # clusters along a tube's rings have one bending motion close to the rigid ones but
+    # not spanned by them: none is left out, and the coarse system factors soundly
+    solver = _solver("end_to_end")
+    ls = solver.solver
+    state, _, _ = ls.local(solver.initial_guess())
+    model = twolevel.TwoLevelModel(ls, bending=True)
+    model.refresh(state, 1)
+    assert model.left_out.size == 0
+    assert model.fallback is None and model.coarse_factor is not None
