@@ -36,17 +36,22 @@ def _dihedral_summary(angles: np.ndarray) -> dict:
     return {**metrics.summary(angles), "rings": metrics.HOST_DIHEDRAL_RINGS}
 
 
-def _fixed_reports(inputs: list[CreaseMeasure], removed: np.ndarray, dihedral: np.ndarray) -> dict:
+def _fixed_reports_of(
+    inputs: list[CreaseMeasure],
+    removed: Callable[[], np.ndarray],
+    dihedral: Callable[[], np.ndarray],
+) -> dict:
     """The reports of a join that no solve changes, for one seam or all.
 
     Parameters
     ----------
     inputs : list of CreaseMeasure
         The inputs' band crease, one per seam.
-    removed : ndarray, shape (r,)
-        The crease the smooth-join terms remove (degrees).
-    dihedral : ndarray, shape (d,)
-        The host's dihedral angles near the curves (degrees).
+    removed : callable
+        Makes the crease the smooth-join terms remove (degrees), shape (r,).
+    dihedral : callable
+        Makes the host's dihedral angles near the curves (degrees), shape (d,).
+        Both are called only here, when the reports are first made.
 
     Returns
     -------
@@ -55,18 +60,9 @@ def _fixed_reports(inputs: list[CreaseMeasure], removed: np.ndarray, dihedral: n
     """
     return {
         "input_crease_deg": crease.report(inputs),
-        "crease_removed_deg": metrics.summary(removed),
-        "host_dihedral_deg": _dihedral_summary(dihedral),
+        "crease_removed_deg": metrics.summary(removed()),
+        "host_dihedral_deg": _dihedral_summary(dihedral()),
     }
-
-
-def _fixed_reports_of(
-    inputs: list[CreaseMeasure],
-    removed: Callable[[], np.ndarray],
-    dihedral: Callable[[], np.ndarray],
-) -> dict:
-    """:func:`_fixed_reports` of the arrays the callables make (only when first made)."""
-    return _fixed_reports(inputs, removed(), dihedral())
 
 
 def _removed(removed: list[np.ndarray], seam: int | None) -> np.ndarray:

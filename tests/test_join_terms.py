@@ -93,7 +93,8 @@ def test_the_quadratic_of_a_matrix_with_duplicate_entries_is_the_straightforward
     rng = np.random.default_rng(0)
     rows, cols = rng.integers(0, 30, 400), rng.integers(0, 50, 400)
     K = sp.csr_matrix((rng.normal(size=400), (rows, cols)), shape=(30, 50))
-    K = sp.csr_matrix((K.data, K.indices, K.indptr), shape=K.shape)  # a copy of canonical K
+    # the same matrix as a new object around K's own arrays (no copy)
+    K = sp.csr_matrix((K.data, K.indices, K.indptr), shape=K.shape)
     dup = sp.csr_matrix(
         (np.concatenate([K.data, K.data[:5]]), np.concatenate([K.indices, K.indices[:5]]),
          np.concatenate([K.indptr[:1], K.indptr[1:] + 5])),
