@@ -226,9 +226,11 @@ class JoinOptions:
     energy_tolerance : float
         Relative energy change at which the iteration stops (formerly
         ``tolerance``): converged when the energy fell by less than
-        ``energy_tolerance`` times its value over the last five iterations
-        and the last iteration moved no vertex by more than
-        ``sqrt(energy_tolerance)`` mean edge lengths (or the energy is below
+        ``energy_tolerance`` times its value over the last five iterations,
+        or the fall still to come at the slowest rate of the last three
+        iterations is below half that, and the last iteration moved no
+        vertex by more than ``sqrt(energy_tolerance)`` mean edge lengths
+        (or the energy is below
         ``energy_tolerance²`` of its scale, a minimum of zero energy). The
         default 1e-7 leaves the energy within about 1e-6 (relative) of the
         minimum the iteration converges to.
