@@ -90,3 +90,41 @@ def test_the_extrapolated_test_stops_earlier_at_the_same_minimum_on_real_cuts(cu
     # (by 2-5 iterations); half that leaves room for the last bits of a factorization that
     # differ between machines
     assert earlier >= 6, earlier
+
+
+@pytest.fixture(scope="module")
+def stopping():
+    """Stopping tests of a small join's solver: tolerance 0.05, any move up to 1e9 small
+    enough, and a start of zero size (its floor is zero: only the energies decide)."""
+    s = igljoin.phantoms.paper_sample("partial_patch", "equal", guest_resolution=0.4)
+    ls = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve).solver
+
+    def make():
+        return solve._StoppingTest(ls, np.zeros((ls.n, 3)), 0.05, 1e9)
+
+    return make
+
+
+def test_the_tail_is_measured_over_whole_steps_only(stopping):
+    # a tail of 2 more to come (decreases 8, 4, 2) against 0.5 x 0.05 x 86 = 2.15, the
+    # window's fall (114 over five) far above 0.05 x 86: only the tail can stop it
+    energy = [200.0, 100.0, 92.0, 88.0, 86.0]
+    whole = stopping()
+    assert not any(whole(energy[: k + 1], 0.0, True) for k in range(1, 4))
+    assert whole(energy, 0.0, True)
+    # the same energies with the last step shortened by the line search: no rate measured
+    shortened = stopping()
+    for k in range(1, 4):
+        shortened(energy[: k + 1], 0.0, True)
+    assert not shortened(energy, 0.0, False)
+    # and three whole steps after it before the tail counts again
+    tail = [*energy, 85.0, 84.5, 84.25]
+    assert not shortened(tail[:6], 0.0, True) and not shortened(tail[:7], 0.0, True)
+    assert shortened(tail, 0.0, True)
+
+
+def test_a_large_move_is_never_converged(stopping):
+    test = stopping()
+    test.step_tolerance = 1.0
+    assert not test([200.0, 100.0, 100.0, 100.0, 100.0, 100.0, 100.0], 2.0, True)
+    assert test([200.0, 100.0, 100.0, 100.0, 100.0, 100.0, 100.0], 0.5, True)
