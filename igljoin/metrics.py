@@ -1057,25 +1057,17 @@ def _near_segments(
         dist, idx = dist.reshape(len(point), count), idx.reshape(len(point), count)
 
 
-def seam_gap(
-    seam_points: np.ndarray,
-    host_points: np.ndarray,
-    closed: bool,
-    *,
-    host: PolylineDistance | None = None,
-) -> dict:
+def seam_gap(seam_points: np.ndarray, host: PolylineDistance) -> dict:
     """Distance of the guest seam to the host curve.
 
     Parameters
     ----------
     seam_points : ndarray, shape (s, 3)
         Deformed guest seam vertices.
-    host_points : ndarray, shape (k, 3)
-        Host curve polyline.
-    closed : bool
-    host : PolylineDistance, optional
-        ``PolylineDistance(host_points, closed)``, if already made (a solver
-        keeps its rigid host's).
+    host : PolylineDistance
+        The distance to the host curve's polyline (k vertices),
+        ``PolylineDistance(host_points, closed)`` (a solver keeps its rigid
+        host's).
 
     Returns
     -------
@@ -1083,7 +1075,6 @@ def seam_gap(
         ``max``, ``mean`` (absolute), ``relative_max``, ``relative_mean``
         (divided by the mean host seam edge).
     """
-    host = PolylineDistance(host_points, closed) if host is None else host
     d = host(seam_points)
     mean_edge = host.mean_segment
     return {
