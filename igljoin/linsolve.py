@@ -451,20 +451,34 @@ class _Pardiso:
 class _FixedRows:
     """What the factored forms share: the free / fixed split and the solve with fixed rows.
 
-    A subclass sets :attr:`free` and :attr:`fixed` through :meth:`_split` and
-    provides ``solve_free`` and ``coupled``.
+    A subclass sets :attr:`n`, :attr:`free` and :attr:`fixed` (through
+    :meth:`_split`, or from :meth:`_blocks`) and provides ``solve_free`` and
+    ``coupled``.
     """
 
     def _split(self, M: sp.spmatrix, fixed: np.ndarray):
         """Set ``n``, ``fixed``, ``free``; return ``M``'s free–free and free–fixed blocks."""
-        n = M.shape[0]
-        self.n = n
-        self.fixed = np.asarray(fixed, dtype=np.int64)
-        mask = np.ones(n, dtype=bool)
-        mask[self.fixed] = False
-        self.free = np.flatnonzero(mask)
-        rows = M[self.free]
-        return sp.csr_matrix(rows[:, self.free]), sp.csr_matrix(rows[:, self.fixed])
+        self.n = M.shape[0]
+        self.fixed, self.free, Mff, Mfb = self._blocks(M, fixed)
+        return Mff, Mfb
+
+    @staticmethod
+    def _blocks(M: sp.spmatrix, fixed: np.ndarray) -> tuple:
+        """The fixed and free rows of ``M`` (n, n) and its free–free and free–fixed blocks.
+
+        Returns
+        -------
+        fixed : ndarray of int64, shape (b,)
+        free : ndarray of int64, shape (n - b,)
+            The rows not in ``fixed``, ascending.
+        Mff, Mfb : scipy.sparse.csr_matrix, shapes (n - b, n - b) and (n - b, b)
+        """
+        fixed = np.asarray(fixed, dtype=np.int64)
+        mask = np.ones(M.shape[0], dtype=bool)
+        mask[fixed] = False
+        free = np.flatnonzero(mask)
+        rows = M[free]
+        return fixed, free, sp.csr_matrix(rows[:, free]), sp.csr_matrix(rows[:, fixed])
 
     def solve(self, B: np.ndarray, bc: np.ndarray) -> np.ndarray:
         """Minimiser of ``½ xᵀ Q x − xᵀ B`` with ``x[fixed] = bc``.
@@ -646,19 +660,54 @@ class AugmentedQuadratic(_FixedRows):
     def __init__(
         self, S: sp.spmatrix, K: sp.spmatrix, weights: np.ndarray, c: float, fixed: np.ndarray
     ):
-        self.Sff, self.Sfb = self._split(sp.csr_matrix(S), fixed)
-        self.backend = "pardiso"
+        S = sp.csr_matrix(S)
+        fixed, free, Sff, Sfb = self._blocks(S, fixed)
         weights = np.asarray(weights, dtype=np.float64)
         keep = np.flatnonzero(weights > 0.0)
         Kc = sp.csc_matrix(sp.csr_matrix(K)[keep])
-        self.Kf = sp.csr_matrix(Kc[:, self.free])
-        self.Kb = sp.csr_matrix(Kc[:, self.fixed])
-        self.Kft = sp.csr_matrix(self.Kf.T)
-        self.cw = float(c) * weights[keep]
+        Kf = sp.csr_matrix(Kc[:, free])
+        self._set_parts(
+            n=S.shape[0],
+            fixed=fixed,
+            free=free,
+            Sff=Sff,
+            Sfb=Sfb,
+            Kf=Kf,
+            Kb=sp.csr_matrix(Kc[:, fixed]),
+            Kft=sp.csr_matrix(Kf.T),
+            cw=float(c) * weights[keep],
+        )
         if not self.free.size:
             return
         FixedQuadratic.made += 1
         self._factor_augmented(augmented_upper(self.Sff, self.Kft, -1.0 / self.cw))
+
+    def _set_parts(self, *, n, fixed, free, Sff, Sfb, Kf, Kb, Kft, cw) -> None:
+        """Set every field but the factorization: the one place they are set.
+
+        Every constructor (a subclass's too) sets them here, so that none
+        misses a field another sets.
+
+        Parameters
+        ----------
+        n : int
+            Unknowns, free and fixed.
+        fixed : ndarray of int64, shape (b,)
+        free : ndarray of int64, shape (n - b,)
+        Sff, Sfb : sparse matrices, shapes (n - b, n - b) and (n - b, b)
+            ``S``'s free–free and free–fixed blocks.
+        Kf, Kb : sparse matrices, shapes (r, n - b) and (r, b)
+            The rows of ``K`` of positive weight, on the free and the fixed columns.
+        Kft : sparse matrix, shape (n - b, r)
+            ``K_fᵀ``.
+        cw : ndarray, shape (r,)
+            ``c W``'s diagonal on those rows.
+        """
+        self.n, self.fixed, self.free = n, fixed, free
+        self.backend = "pardiso"
+        self.Sff, self.Sfb = Sff, Sfb
+        self.Kf, self.Kb, self.Kft = Kf, Kb, Kft
+        self.cw = cw
 
     def _factor_augmented(self, A: sp.spmatrix) -> None:
         """Factor the augmented matrix ``A`` with Pardiso's LDLᵀ and check it by a probe solve.

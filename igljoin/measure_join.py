@@ -322,8 +322,7 @@ def join_result(
             # a seam keeps the smooth join)
             off = np.abs(measured.angles - (angle or 0.0))
             off_angle_all.append(CreaseMeasure(off, band, measured.noise))
-        distance = host_values.distance(hc)
-        gap = metrics.seam_gap(X[part.seam], distance.C, hc.closed, host=distance)
+        gap = metrics.seam_gap(X[part.seam], host_values.distance(hc))
         gaps.append(gap)
         seams.append(
             JoinedSeam(

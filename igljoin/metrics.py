@@ -941,7 +941,7 @@ class PolylineDistance:
                 D = A[None] + t[..., None] * AB[None] - Q[:, None, :]
                 out[s : s + chunk] = np.sqrt(np.einsum("pkj,pkj->pk", D, D).min(axis=1))
             return out
-        point, seg = _near_segments(P, A, AB, self._midpoints)
+        point, seg = _near_segments(P, A, AB, ab2, self._midpoints)
         return _segment_distances(P, A, AB, ab2, point, seg, len(P))
 
     @cached_property
@@ -951,27 +951,28 @@ class PolylineDistance:
 
     @cached_property
     def _midpoints(self) -> _Midpoints:
-        return _midpoints(self.A, self.AB)
+        return _midpoints(self.A, self.AB, self.ab2)
 
 
 class _Midpoints(NamedTuple):
     """The segments' side of :func:`_near_segments`: midpoints, half lengths, search tree."""
 
     M: np.ndarray
-    ab2: np.ndarray
     half: np.ndarray
     half_max: np.floating
     extent: float
     tree: cKDTree
 
 
-def _midpoints(A: np.ndarray, AB: np.ndarray) -> _Midpoints:
-    """:class:`_Midpoints` of the segments from ``A`` along ``AB`` (each shape (k, 3))."""
+def _midpoints(A: np.ndarray, AB: np.ndarray, ab2: np.ndarray) -> _Midpoints:
+    """:class:`_Midpoints` of the segments from ``A`` along ``AB`` (each shape (k, 3)).
+
+    ``ab2`` (k,) are their squared lengths, :attr:`PolylineDistance.ab2`.
+    """
     M = A + 0.5 * AB
-    ab2 = np.maximum(np.einsum("ij,ij->i", AB, AB), 1e-300)
     half = 0.5 * np.sqrt(ab2)
     extent = max(float(np.abs(M).max()), float(half.max()))
-    return _Midpoints(M, ab2, half, half.max(), extent, cKDTree(M))
+    return _Midpoints(M, half, half.max(), extent, cKDTree(M))
 
 
 def _segment_distances(P, A, AB, ab2, point, seg, p) -> np.ndarray:
@@ -1003,7 +1004,7 @@ def _segment_distances(P, A, AB, ab2, point, seg, p) -> np.ndarray:
 
 
 def _near_segments(
-    P: np.ndarray, A: np.ndarray, AB: np.ndarray, kept: _Midpoints | None = None
+    P: np.ndarray, A: np.ndarray, AB: np.ndarray, ab2: np.ndarray, kept: _Midpoints | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Point-segment pairs that include, for each point, every segment that can be nearest.
 
@@ -1021,8 +1022,10 @@ def _near_segments(
     P : ndarray, shape (p, 3)
     A, AB : ndarray, shape (k, 3)
         Segment starts and vectors.
+    ab2 : ndarray, shape (k,)
+        Squared segment lengths (at least ``1e-300``).
     kept : _Midpoints, optional
-        ``_midpoints(A, AB)``, if already made.
+        ``_midpoints(A, AB, ab2)``, if already made.
 
     Returns
     -------
@@ -1030,7 +1033,7 @@ def _near_segments(
         The pairs, every point at least once.
     """
     k, p = len(A), len(P)
-    M, ab2, half, half_max, extent, tree = _midpoints(A, AB) if kept is None else kept
+    M, half, half_max, extent, tree = _midpoints(A, AB, ab2) if kept is None else kept
     # the `count` nearest midpoints of every point: the nearest gives the bound
     count = min(k, 8)
     dist, idx = tree.query(P, k=count)
@@ -1057,25 +1060,17 @@ def _near_segments(
         dist, idx = dist.reshape(len(point), count), idx.reshape(len(point), count)
 
 
-def seam_gap(
-    seam_points: np.ndarray,
-    host_points: np.ndarray,
-    closed: bool,
-    *,
-    host: PolylineDistance | None = None,
-) -> dict:
+def seam_gap(seam_points: np.ndarray, host: PolylineDistance) -> dict:
     """Distance of the guest seam to the host curve.
 
     Parameters
     ----------
     seam_points : ndarray, shape (s, 3)
         Deformed guest seam vertices.
-    host_points : ndarray, shape (k, 3)
-        Host curve polyline.
-    closed : bool
-    host : PolylineDistance, optional
-        ``PolylineDistance(host_points, closed)``, if already made (a solver
-        keeps its rigid host's).
+    host : PolylineDistance
+        The distance to the host curve's polyline (k vertices),
+        ``PolylineDistance(host_points, closed)`` (a solver keeps its rigid
+        host's).
 
     Returns
     -------
@@ -1083,7 +1078,6 @@ def seam_gap(
         ``max``, ``mean`` (absolute), ``relative_max``, ``relative_mean``
         (divided by the mean host seam edge).
     """
-    host = PolylineDistance(host_points, closed) if host is None else host
     d = host(seam_points)
     mean_edge = host.mean_segment
     return {

@@ -39,8 +39,16 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import get_index_dtype
 
+from .errors import OptionsError
 from .linsolve import FixedQuadratic
-from .terms import ROTATION_REGULARISATION, LocalState, ShapeTerm, SmoothJoinTerm, StretchTerm
+from .terms import (
+    ROTATION_REGULARISATION,
+    LocalState,
+    ShapeTerm,
+    SmoothJoinTerm,
+    StretchTerm,
+    band_couplings,
+)
 
 __all__ = [
     "gauss_newton",
@@ -51,8 +59,23 @@ __all__ = [
     "row_directions",
     "factor_entries",
     "dofs",
+    "assembled_entries",
     "NewtonModel",
+    "MAX_MODEL_ENTRIES",
 ]
+
+#: Largest count of :func:`assembled_entries` :class:`NewtonModel` builds. Measured with
+#: the default backend, the assembly and factorization peak at 50-73 bytes per counted
+#: entry above the solver's own memory: 50 (1.3k patch, 4.6e5 entries, cholespy), 62
+#: (2.5k tube, 1.0e6), 56 (10k patch, 7.5e6, 0.42 GB), 73 (10k tube, 6.5e6), 50 (20k
+#: patch, 2.1e7, Pardiso), 51 (30k patch, 4.0e7, 2.1 GB) and 51 (44k patch, 8.1e7, 4.2
+#: GB). 1e8 entries are 5-7.5 GB; the 10k patch, the largest model the benchmark builds,
+#: counts 7.5e6. Past it the model is refused (an ``OptionsError``).
+MAX_MODEL_ENTRIES = 100_000_000
+
+#: Bytes the assembly and factorization spend per counted entry (the 50-73 measured above,
+#: rounded up).
+_BYTES_PER_ENTRY = 75
 
 
 def _kron3(K: sp.spmatrix, H: np.ndarray | None = None, cache: dict | None = None) -> sp.csr_matrix:
@@ -342,6 +365,30 @@ def factor_entries(term) -> int:
     return nnz
 
 
+def assembled_entries(terms: list) -> int:
+    """Entries counted for :func:`gauss_newton`'s matrix, from the terms' patterns alone.
+
+    Nine (a 3 × 3 block) per vertex pair each term's operator ``K``
+    couples, the non-zeros of ``Kᵀ K`` (the band smooth join's kept
+    ``couplings``, :func:`igljoin.terms.band_couplings` for the others):
+    more than the assembled matrix stores where the terms' patterns overlap.
+    Nothing of the model is built.
+
+    Parameters
+    ----------
+    terms : list of Term
+
+    Returns
+    -------
+    int
+    """
+    pairs = 0.0
+    for term in terms:
+        kept = getattr(term, "couplings", None)
+        pairs += kept if kept is not None else band_couplings(sp.csr_matrix(term.K))
+    return int(round(9 * pairs))
+
+
 def gauss_newton(terms: list, state: LocalState, n: int) -> sp.csr_matrix:
     """Half the Gauss–Newton Hessian of the join energy at ``state.X``, shape (3n, 3n).
 
@@ -384,13 +431,33 @@ class NewtonModel:
 
     Attributes
     ----------
+    entries : int
+        :func:`assembled_entries` of the solver's terms, counted at
+        construction.
     factorizations : int
     seconds : dict
         ``assemble`` and ``factor`` times.
+
+    Raises
+    ------
+    OptionsError
+        The model would hold more than :data:`MAX_MODEL_ENTRIES` entries
+        (counted before anything is built).
     """
 
     def __init__(self, solver, every: int = 1_000_000):
         self.solver = solver
+        self.entries = assembled_entries(solver.terms)
+        if self.entries > MAX_MODEL_ENTRIES:
+            raise OptionsError(
+                f"the Gauss–Newton model would hold about {self.entries:,} entries (a 3 x 3 "
+                f"block per vertex pair its terms couple, at {solver.n:,} guest vertices), "
+                f"more than igljoin.newton.MAX_MODEL_ENTRIES = {MAX_MODEL_ENTRIES:,} (about "
+                f"{_BYTES_PER_ENTRY * self.entries / 1e9:.2g} GB to assemble and factor): run "
+                "without it (the factored preconditioner P) or with "
+                "preconditioner='two-level' (the model on clusters' motions), or raise "
+                "igljoin.newton.MAX_MODEL_ENTRIES"
+            )
         self.every = max(int(every), 1)
         self.fixed = dofs(solver.fixed)
         self.factor = None

@@ -156,7 +156,7 @@ class Term(ABC):
         e = float(np.dot(self.weights, np.einsum("ij,ij->i", r, r)))
         KtW = getattr(self, "_KtW", None)
         if KtW is None:
-            KtW = self._KtW = sp.csr_matrix(self.K.T @ sp.diags(self.weights))
+            KtW = self._KtW = _weighted_transpose(self.K, self.weights)
         return e, KtW @ r
 
     def local_into(self, state: LocalState, G: np.ndarray) -> float:
@@ -238,11 +238,30 @@ def _gram(K: sp.spmatrix, weights: np.ndarray) -> sp.csr_matrix:
     K = sp.csr_matrix(K)
     if not K.has_canonical_format:
         return sp.csr_matrix(K.T @ sp.diags(weights) @ K)
-    KtW = sp.csr_matrix(K.T)
-    KtW.data = KtW.data * np.asarray(weights, dtype=np.float64)[KtW.indices]
-    Q = sp.csr_matrix(KtW @ K)
+    # the zeros _weighted_transpose leaves out add nothing to a sum, and a product's
+    # entries that sum to zero are left out either way
+    Q = sp.csr_matrix(_weighted_transpose(K, weights) @ K)
     Q.sort_indices()
     return Q
+
+
+def _weighted_transpose(K: sp.spmatrix, weights: np.ndarray) -> sp.csr_matrix:
+    """``Kᵀ diag(weights)``, shape (n, r), for ``K`` of shape (r, n): the floats and the
+    layout of ``sp.csr_matrix(K.T @ sp.diags(weights))``, without the product.
+
+    Each entry is one product ``K[r, i] w[r]``; ``Kᵀ``'s entries are scaled by
+    their row's weight and those that come out zero dropped, as the product
+    drops them (a row of weight 0 keeps no entry); the columns are sorted as
+    the conversion from ``Kᵀ`` sorts them. A ``K`` with unsorted or duplicate
+    entries takes the expression itself.
+    """
+    K = sp.csr_matrix(K)
+    if not K.has_canonical_format:
+        return sp.csr_matrix(K.T @ sp.diags(weights))
+    KtW = sp.csr_matrix(K.T)
+    KtW.data = KtW.data * np.asarray(weights, dtype=np.float64)[KtW.indices]
+    KtW.eliminate_zeros()
+    return KtW
 
 
 def _difference_operator(E: np.ndarray, n: int) -> sp.csr_matrix:

@@ -283,7 +283,7 @@ def repeated_directed_edges(F: np.ndarray, n: int | None = None) -> int:
     return int((row_counts(directed, n) > 1).sum())
 
 
-def repeated_directed_pairs(half, pairs: np.ndarray | None = None) -> int:
+def repeated_directed_pairs(half, pairs: np.ndarray) -> int:
     """:func:`repeated_directed_edges` of a surface whose edges have at most two face sides.
 
     Read from its half-edges sorted by undirected edge (``half_edges(F, n)``):
@@ -295,18 +295,15 @@ def repeated_directed_pairs(half, pairs: np.ndarray | None = None) -> int:
     ----------
     half : tuple
         ``half_edges(F, n)``.
-    pairs : ndarray of int64, optional
+    pairs : ndarray of int64
         Where each run of two equal keys starts in the sorted half-edges
-        (``start[count == 2]`` of :func:`runs`, when a caller has them);
-        found here otherwise.
+        (``start[count == 2]`` of :func:`runs` of their keys).
 
     Returns
     -------
     int
     """
-    src, _, order, skey = half
-    if pairs is None:
-        pairs = np.flatnonzero(skey[1:] == skey[:-1])
+    src, _, order, _ = half
     return int(np.count_nonzero(src[order[pairs]] == src[order[pairs + 1]]))
 
 

@@ -166,14 +166,19 @@ class _CoarseAugmented(AugmentedQuadratic):
 
     def __init__(self, S: sp.csr_matrix, U: sp.csr_matrix, weights: np.ndarray):
         n, weights = S.shape[0], np.asarray(weights, dtype=np.float64)
-        self.n, self.fixed, self.free = n, np.zeros(0, dtype=np.int64), np.arange(n)
-        self.backend = "pardiso"
         keep = np.flatnonzero(weights > 0.0)
-        self.Sff = S
-        self.Kf = U if len(keep) == U.shape[0] else sp.csr_matrix(U[keep])
-        self.Kft = self.Kf.T
-        self.cw = weights[keep]
-        self.Sfb, self.Kb = sp.csr_matrix((n, 0)), sp.csr_matrix((len(keep), 0))
+        Kf = U if len(keep) == U.shape[0] else sp.csr_matrix(U[keep])
+        self._set_parts(
+            n=n,
+            fixed=np.zeros(0, dtype=np.int64),
+            free=np.arange(n),
+            Sff=S,
+            Sfb=sp.csr_matrix((n, 0)),
+            Kf=Kf,
+            Kb=sp.csr_matrix((len(keep), 0)),
+            Kft=Kf.T,
+            cw=weights[keep],
+        )
         if not n:
             return
         FixedQuadratic.made += 1

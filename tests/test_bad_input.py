@@ -68,6 +68,20 @@ def _two_level_past_its_limit():
         twolevel.MAX_MODEL_ENTRIES = before
 
 
+def _newton_model_past_its_limit():
+    """The Gauss–Newton model of a join whose count is over ``MAX_MODEL_ENTRIES``, lowered
+    to 1,000."""
+    from igljoin import newton
+
+    solver = igljoin.JoinSolver(HOST, GUEST, HC)
+    before = newton.MAX_MODEL_ENTRIES
+    newton.MAX_MODEL_ENTRIES = 1_000
+    try:
+        return newton.NewtonModel(solver.solver)
+    finally:
+        newton.MAX_MODEL_ENTRIES = before
+
+
 def _write(tmp: Path, name: str, data: bytes) -> Path:
     p = tmp / name
     p.write_bytes(data)
@@ -417,6 +431,13 @@ def _corpus() -> list[Case]:
             lambda t: _two_level_past_its_limit(),
             igljoin.OptionsError,
             ("two-level preconditioner's model would hold", "preconditioner='factored'"),
+        ),
+        Case(
+            # as above: 1,000 entries stand in for a guest of tens of thousands of vertices
+            "Gauss–Newton model past its size limit",
+            lambda t: _newton_model_past_its_limit(),
+            igljoin.OptionsError,
+            ("Gauss–Newton model would hold", "MAX_MODEL_ENTRIES", "preconditioner='two-level'"),
         ),
         Case(
             "not a mesh",

@@ -12,7 +12,7 @@ import igljoin
 from igljoin import phantoms, terms
 from igljoin.join_terms import TERMS
 from igljoin.options import JoinOptions
-from igljoin.terms import ShapeTerm, SmoothJoinTerm, StretchTerm, check_order
+from igljoin.terms import LocalState, ShapeTerm, SmoothJoinTerm, StretchTerm, check_order
 
 
 @pytest.fixture(scope="module")
@@ -79,13 +79,21 @@ def test_a_terms_quadratic_is_the_straightforward_product_to_the_bit(mode):
     # quadratic that differed in either would change the join's answers
     for key in [("end_to_end", "equal"), ("partial_patch", "longer")]:
         s = phantoms.paper_sample(*key)
-        smooth = _terms(s, smooth_mode=mode)[-1]
+        solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve, smooth_mode=mode)
+        smooth = solver.terms[-1]
         assert isinstance(smooth, SmoothJoinTerm)
         K, w = smooth.K, smooth.weights
         _same_csr(smooth.quadratic(), sp.csr_matrix(K.T @ sp.diags(w) @ K))
-        # rows of weight 0 (a seam vertex the term leaves alone)
+        # the local step's Kᵀ W (made by the numpy step) is the expression's too, as the
+        # quadratic's first factor is
+        smooth.compiled = False
+        smooth.local(LocalState(solver.initial_guess()))
+        _same_csr(smooth._KtW, sp.csr_matrix(K.T @ sp.diags(w)))
+        # rows of weight 0 (a seam vertex the term leaves alone): the product keeps none of
+        # their entries
         w = np.where(np.arange(len(w)) % 3 == 0, 0.0, w)
         _same_csr(terms._gram(K, w), sp.csr_matrix(K.T @ sp.diags(w) @ K))
+        _same_csr(terms._weighted_transpose(K, w), sp.csr_matrix(K.T @ sp.diags(w)))
 
 
 def test_the_quadratic_of_a_matrix_with_duplicate_entries_is_the_straightforward_product():
@@ -104,3 +112,5 @@ def test_the_quadratic_of_a_matrix_with_duplicate_entries_is_the_straightforward
     w = rng.uniform(0.5, 2.0, 30)
     _same_csr(terms._gram(dup, w), sp.csr_matrix(dup.T @ sp.diags(w) @ dup))
     _same_csr(terms._gram(K, w), sp.csr_matrix(K.T @ sp.diags(w) @ K))
+    _same_csr(terms._weighted_transpose(dup, w), sp.csr_matrix(dup.T @ sp.diags(w)))
+    _same_csr(terms._weighted_transpose(K, w), sp.csr_matrix(K.T @ sp.diags(w)))

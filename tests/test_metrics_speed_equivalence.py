@@ -391,7 +391,7 @@ def test_seam_gap_matches_all_pairs(joins):
         for sm in res.seams:
             P, C = res.guest.V[sm.seam], res.host.V[sm.host_curve]
             d = _ref_point_polyline_distance(P, C, sm.closed)
-            gap = metrics.seam_gap(P, C, sm.closed)
+            gap = metrics.seam_gap(P, metrics.PolylineDistance(C, sm.closed))
             assert gap["max"] == float(d.max()) and gap["mean"] == float(d.mean())
             assert res.metrics["seams"][0]["seam_gap"] == gap
 
@@ -746,7 +746,8 @@ def test_a_kept_polyline_distance_measures_as_the_function(closed):
         want = _ref_point_polyline_distance(P, C, closed)
         _assert_same(kept(P), want)
         _assert_same(metrics.point_polyline_distance(P, C, closed), want)
-        assert metrics.seam_gap(P, C, closed, host=kept) == metrics.seam_gap(P, C, closed)
+        made = metrics.PolylineDistance(C, closed)
+        assert metrics.seam_gap(P, kept) == metrics.seam_gap(P, made)
     assert kept.mean_segment == igljoin.polyline.mean_segment(C, closed)
 
 

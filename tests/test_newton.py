@@ -87,6 +87,48 @@ def test_same_minimum_as_a_long_plain_run_in_fewer_iterations(scenario):
     assert np.all(np.diff(fast.energy) <= 0.0)
 
 
+def test_the_model_is_counted_and_refused_past_its_limit_before_it_is_built(patch, monkeypatch):
+    solver = igljoin.JoinSolver(patch.host, patch.guest, patch.host_curve, patch.guest_curve)
+    ls = solver.solver
+    count = newton.assembled_entries(ls.terms)
+    built = []
+    assemble = newton.gauss_newton
+
+    def spied(*args):
+        built.append(args)
+        return assemble(*args)
+
+    monkeypatch.setattr(newton, "gauss_newton", spied)
+    monkeypatch.setattr(newton, "MAX_MODEL_ENTRIES", count - 1)
+    with pytest.raises(igljoin.OptionsError) as refused:
+        newton.NewtonModel(ls)
+    message = str(refused.value)
+    assert f"about {count:,} entries" in message
+    assert f"MAX_MODEL_ENTRIES = {count - 1:,}" in message
+    assert "preconditioner='two-level'" in message
+    assert not built
+    # at the limit the model is built, and the count does not fall short of what it stores
+    # (nine per pair of every term: more than the union the matrix holds)
+    monkeypatch.setattr(newton, "MAX_MODEL_ENTRIES", count)
+    model = newton.NewtonModel(ls)
+    assert model.entries == count
+    state = ls.local(solver.initial_guess())[0]
+    model.refresh(state, 1)
+    assert len(built) == 1 and model.factorizations == 1
+    assert assemble(ls.terms, state, ls.n).nnz <= count
+
+
+def test_the_largest_model_the_benchmark_builds_is_allowed():
+    # the benchmark's 10k patch (pipelines/benchmark.py: ~1,180 guest vertices per
+    # guest_resolution²), whose Gauss–Newton model it builds; counting builds nothing
+    s = phantoms.paper_sample(
+        "partial_patch", "equal", guest_resolution=float(np.sqrt(10_000 / 1180))
+    )
+    solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    model = newton.NewtonModel(solver.solver)
+    assert model.entries <= newton.MAX_MODEL_ENTRIES and model.factor is None
+
+
 def _cross(c):
     """Cross-product matrices [c]x (k, 3, 3) of vectors c (k, 3)."""
     out = np.zeros((len(c), 3, 3))

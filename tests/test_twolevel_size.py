@@ -188,6 +188,39 @@ def test_a_singular_coarse_system_is_refused_with_the_way_out():
     assert np.abs(A @ f.solve_free(b) - b).max() <= 1e-12 * np.abs(b).max()
 
 
+def _coarse_and_base(patch):
+    """The partial patch's coarse factor with its band rows kept apart, and the base class
+    made on the same parts (``S``, ``U``, ``W``, no fixed rows)."""
+    model = twolevel.TwoLevelModel(patch.solver, cluster_size=5)
+    model.refresh(_start(patch), 1)
+    coarse = model.coarse_factor
+    base = linsolve.AugmentedQuadratic(
+        coarse.Sff, coarse.Kf, coarse.cw, 1.0, np.zeros(0, dtype=np.int64)
+    )
+    return coarse, base
+
+
+@pardiso
+def test_the_coarse_factor_has_every_field_the_base_sets(patch, monkeypatch):
+    # the small patch's band rows reach too few clusters for the real threshold (see
+    # test_band_rows_kept_apart_give_the_same_coarse_model): 2 keeps them apart alone
+    monkeypatch.setattr(twolevel, "_WIDE_CLUSTERS", 2)
+    coarse, base = _coarse_and_base(patch)
+    assert type(coarse) is twolevel._CoarseAugmented
+    assert set(vars(base)) <= set(vars(coarse))
+    assert base.n == coarse.n and base.free.tolist() == coarse.free.tolist()
+    # a field the base's one setter gains is one the subclass has too
+    setter = linsolve.AugmentedQuadratic._set_parts
+
+    def with_a_new_field(self, **parts):
+        setter(self, **parts)
+        self.new_field = parts["n"]
+
+    monkeypatch.setattr(linsolve.AugmentedQuadratic, "_set_parts", with_a_new_field)
+    coarse, base = _coarse_and_base(patch)
+    assert coarse.new_field == base.new_field == base.n
+
+
 @pytest.fixture(scope="module")
 def patch30k():
     # a 30k-vertex patch (the benchmark's patch phantom, 1,180 guest vertices at resolution
