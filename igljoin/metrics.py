@@ -1004,7 +1004,7 @@ def _segment_distances(P, A, AB, ab2, point, seg, p) -> np.ndarray:
 
 
 def _near_segments(
-    P: np.ndarray, A: np.ndarray, AB: np.ndarray, ab2: np.ndarray, kept: _Midpoints | None = None
+    P: np.ndarray, A: np.ndarray, AB: np.ndarray, ab2: np.ndarray, kept: _Midpoints
 ) -> tuple[np.ndarray, np.ndarray]:
     """Point-segment pairs that include, for each point, every segment that can be nearest.
 
@@ -1024,8 +1024,8 @@ def _near_segments(
         Segment starts and vectors.
     ab2 : ndarray, shape (k,)
         Squared segment lengths (at least ``1e-300``).
-    kept : _Midpoints, optional
-        ``_midpoints(A, AB, ab2)``, if already made.
+    kept : _Midpoints
+        ``_midpoints(A, AB, ab2)`` (a :class:`PolylineDistance` keeps it).
 
     Returns
     -------
@@ -1033,7 +1033,7 @@ def _near_segments(
         The pairs, every point at least once.
     """
     k, p = len(A), len(P)
-    M, half, half_max, extent, tree = _midpoints(A, AB, ab2) if kept is None else kept
+    M, half, half_max, extent, tree = kept
     # the `count` nearest midpoints of every point: the nearest gives the bound
     count = min(k, 8)
     dist, idx = tree.query(P, k=count)
