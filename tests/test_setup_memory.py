@@ -1,0 +1,81 @@
+"""What a join's set-up holds while it factors, and that holding less changes no float."""
+
+from __future__ import annotations
+
+import gc
+import weakref
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import igljoin
+import igljoin.solve
+from igljoin import linsolve, phantoms
+from igljoin.terms import ShapeTerm, SmoothJoinTerm, StretchTerm
+
+needs_pardiso = pytest.mark.skipif(
+    "pardiso" not in linsolve.available_backends(), reason="mkl (igljoin[pardiso]) missing"
+)
+
+
+@pytest.fixture(scope="module", params=["end_to_end", "partial_patch"])
+def sample(request):
+    return phantoms.paper_sample(request.param, "equal")
+
+
+def _solver(s):
+    return igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve).solver
+
+
+def _same(A: sp.csr_matrix, B: sp.csr_matrix) -> bool:
+    """The same stored arrays, to the bit (the layout too: later sums read it)."""
+    return all(np.array_equal(getattr(A, a), getattr(B, a)) for a in ("data", "indices", "indptr"))
+
+
+def _blocks_alive_at_factor(monkeypatch, s) -> tuple[int, list]:
+    """Terms' quadratic blocks made during a set-up of ``s``, and how many were still held
+    (not collected) when each factorization of the set-up started."""
+    made, alive = [], []
+    for cls in (ShapeTerm, StretchTerm, SmoothJoinTerm):
+
+        def recorded(self, _quadratic=cls.quadratic):
+            block = _quadratic(self)
+            made.append(weakref.ref(block))
+            return block
+
+        monkeypatch.setattr(cls, "quadratic", recorded)
+    for cls in (linsolve.FixedQuadratic, linsolve.AugmentedQuadratic):
+
+        def factored(*args, _make=cls):
+            gc.collect()
+            alive.append(sum(ref() is not None for ref in made))
+            return _make(*args)
+
+        monkeypatch.setattr(igljoin.solve, cls.__name__, factored)
+    _solver(s)
+    return len(made), alive
+
+
+def test_term_blocks_are_let_go_before_the_factorization(sample, monkeypatch):
+    made, alive = _blocks_alive_at_factor(monkeypatch, sample)
+    assert made == 3  # shape, stretch and the smooth join's formed block
+    assert alive == [0]  # one factorization, every block summed and gone
+
+
+@needs_pardiso
+def test_term_blocks_are_let_go_before_the_augmented_factorization(sample, monkeypatch):
+    monkeypatch.setattr(igljoin.solve, "AUGMENT_FROM_COUPLINGS", 0)
+    made, alive = _blocks_alive_at_factor(monkeypatch, sample)
+    assert made == 2  # shape and stretch: the band block is never formed
+    assert alive == [0]
+
+
+def test_summed_blocks_are_the_sums_of_their_list(sample):
+    ls = _solver(sample)
+    n, zero = ls.n, sp.csr_matrix((ls.n, ls.n))
+    blocks = [t.quadratic() for t in ls.terms]
+    assert ls.P is not ls.Q  # the stretch and smooth terms' scales are below 1
+    assert _same(ls.Q, sp.csr_matrix(sum(blocks, zero)))
+    scaled = [t.preconditioner_scale * q for t, q in zip(ls.terms, blocks)]
+    assert _same(ls.P, sp.csr_matrix(sum(scaled, sp.csr_matrix((n, n)))))
