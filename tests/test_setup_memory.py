@@ -79,3 +79,42 @@ def test_summed_blocks_are_the_sums_of_their_list(sample):
     assert _same(ls.Q, sp.csr_matrix(sum(blocks, zero)))
     scaled = [t.preconditioner_scale * q for t, q in zip(ls.terms, blocks)]
     assert _same(ls.P, sp.csr_matrix(sum(scaled, sp.csr_matrix((n, n)))))
+
+
+@needs_pardiso
+def test_the_other_terms_sums_are_made_where_used(sample, monkeypatch):
+    monkeypatch.setattr(igljoin.solve, "AUGMENT_FROM_COUPLINGS", 0)
+    sums = []
+
+    def recorded(*args, _summed=igljoin.solve._summed, **kwargs):
+        out = _summed(*args, **kwargs)
+        sums.extend(weakref.ref(m) for m in out if m is not None)
+        return out
+
+    monkeypatch.setattr(igljoin.solve, "_summed", recorded)
+    js = igljoin.JoinSolver(sample.host, sample.guest, sample.host_curve, sample.guest_curve)
+    ls = js.solver
+    gc.collect()
+    # the set-up made the scaled sum only (the factorization's), and let it go
+    assert len(sums) == 1 and sums[0]() is None
+    assert not [k for k, v in vars(ls).items() if isinstance(v, sp.spmatrix)]
+    # what is made from them later is what the sums kept would have made, to the bit
+    wide = ls.wide
+    others = [t for t in ls.terms if t is not wide]
+    blocks = [t.quadratic() for t in others]
+    n = ls.n
+    rest_q = sp.csr_matrix(sum(blocks, sp.csr_matrix((n, n))))
+    scaled = [t.preconditioner_scale * q for t, q in zip(others, blocks)]
+    rest_p = sp.csr_matrix(sum(scaled, sp.csr_matrix((n, n))))
+    assert _same(ls.Q, sp.csr_matrix(rest_q + wide.quadratic()))
+    assert _same(ls.P, sp.csr_matrix(rest_p + wide.preconditioner_scale * wide.quadratic()))
+    X = js.solve().guest.V
+    Xc = X - np.mean(X, axis=0)
+    KX = wide.K @ Xc
+    e_ref = float(np.einsum("ij,ij->", Xc, rest_q @ Xc)) + float(
+        np.dot(wide.weights, np.einsum("ij,ij->i", KX, KX))
+    )
+    assert ls.energy_floor(X, 1e-3) == 1e-3 * 1e-3 * e_ref
+    v = np.random.default_rng(0).normal(size=(len(ls.free), 3))
+    plain = linsolve.AugmentedQuadratic(rest_q, wide.K, wide.weights, 1.0, ls.fixed)
+    assert np.array_equal(ls.plain_factor().solve_free(v), plain.solve_free(v))
