@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -302,7 +303,8 @@ class JoinSolver:
         )
         t1 = time.perf_counter()
         E = unique_edges(c.F)
-        # the rest guest's measures (see join_result); its band fits serve the terms too
+        # the rest guest's measures (see join_result); its band fits serve the terms too,
+        # which keep none of their own
         rest = RestMeasures(c, E)
         # §4.2–4.4: shape, stretch and one smooth-join term per seam
         curves = [p.host_curve for p in self.pairs]
@@ -314,7 +316,8 @@ class JoinSolver:
             rest.fit(part.seam[part.host_hit], curve.closed, band)
         built = build_terms(
             TermInputs(
-                opt, c, E, self.guest, host, self.host_values, curves, parts, bands, rest.fit,
+                opt, c, E, self.guest, host, self.host_values, curves, parts, bands,
+                partial(rest.fit, keep=False),
             )
         )  # fmt: skip
         t2 = time.perf_counter()

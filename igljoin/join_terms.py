@@ -280,7 +280,8 @@ class TermInputs:
     rest_fit : callable
         ``rest_fit(curve, closed, band)``: the rest guest's band fit along
         ``curve`` (``band_fit(corr.V, corr.F, curve, closed, band)``), from the
-        store the solver's measures share.
+        store the solver's measures share where they made it (else made and
+        not kept: :meth:`igljoin.measure_join.RestMeasures.fit`).
     """
 
     options: JoinOptions

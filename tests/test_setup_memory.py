@@ -11,7 +11,7 @@ import scipy.sparse as sp
 
 import igljoin
 import igljoin.solve
-from igljoin import linsolve, phantoms
+from igljoin import linsolve, measure_join, phantoms
 from igljoin.terms import ShapeTerm, SmoothJoinTerm, StretchTerm
 
 needs_pardiso = pytest.mark.skipif(
@@ -118,3 +118,48 @@ def test_the_other_terms_sums_are_made_where_used(sample, monkeypatch):
     v = np.random.default_rng(0).normal(size=(len(ls.free), 3))
     plain = linsolve.AugmentedQuadratic(rest_q, wide.K, wide.weights, 1.0, ls.fixed)
     assert np.array_equal(ls.plain_factor().solve_free(v), plain.solve_free(v))
+
+
+def _fits(js) -> list:
+    """The rest guest's band fits the solver keeps, by their number of rows."""
+    return sorted(v.weights.shape[0] for k, v in js._rest.made.items() if k[0] == "fit")
+
+
+def test_a_terms_fit_along_the_whole_seam_is_not_kept(monkeypatch):
+    # host points inserted into the guest's seam: the term's fit (the whole seam) is not
+    # the measures' (the seam vertices on host curve vertices)
+    s = phantoms.paper_sample("end_to_end", "equal")
+    js = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    part = js.parts[0]
+    assert len(part.host_hit) < len(part.seam)
+    assert _fits(js) == [len(part.host_hit)]
+    res = js.solve()
+    # keeping it, as the store did, makes the same rows and the same join, to the bit
+    fit = measure_join.RestMeasures.fit
+
+    def kept(self, curve, closed, band, keep=True):
+        return fit(self, curve, closed, band)
+
+    monkeypatch.setattr(measure_join.RestMeasures, "fit", kept)
+    js_kept = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    assert _fits(js_kept) == [len(part.host_hit), len(part.seam)]
+    assert _same(js.terms[-1].K, js_kept.terms[-1].K)
+    res_kept = js_kept.solve()
+    assert res.energy == res_kept.energy
+    assert np.array_equal(res.guest.V, res_kept.guest.V)
+    assert np.array_equal(res.crease, res_kept.crease)
+
+
+def test_a_fit_the_measures_share_is_made_once(monkeypatch):
+    # every seam vertex on a host curve vertex: the term's fit is the measures'
+    s = phantoms.paper_sample("partial_patch", "equal")
+    made = []
+
+    def counted(*args, _band_fit=measure_join.band_fit):
+        made.append(len(args[2]))
+        return _band_fit(*args)
+
+    monkeypatch.setattr(measure_join, "band_fit", counted)
+    js = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    assert made == [len(js.parts[0].seam)]
+    assert _fits(js) == made
