@@ -665,16 +665,21 @@ class AugmentedQuadratic(_FixedRows):
         weights = np.asarray(weights, dtype=np.float64)
         keep = np.flatnonzero(weights > 0.0)
         Kc = sp.csc_matrix(sp.csr_matrix(K)[keep])
-        Kf = sp.csr_matrix(Kc[:, free])
+        Kb = sp.csr_matrix(Kc[:, fixed])
+        # K_f is kept only as K_fᵀ (K_f is its transposed view, with the same sums:
+        # K_f's rows have ascending columns, the order K_fᵀ's columns are read in); the
+        # rows of positive weight let go before the factorization (at 1M guest vertices
+        # 0.31 GB each)
+        Kft = sp.csr_matrix(Kc[:, free].T)
+        del Kc
         self._set_parts(
             n=S.shape[0],
             fixed=fixed,
             free=free,
             Sff=Sff,
             Sfb=Sfb,
-            Kf=Kf,
-            Kb=sp.csr_matrix(Kc[:, fixed]),
-            Kft=sp.csr_matrix(Kf.T),
+            Kb=Kb,
+            Kft=Kft,
             cw=float(c) * weights[keep],
         )
         if not self.free.size:
@@ -682,7 +687,7 @@ class AugmentedQuadratic(_FixedRows):
         FixedQuadratic.made += 1
         self._factor_augmented(augmented_upper(self.Sff, self.Kft, -1.0 / self.cw))
 
-    def _set_parts(self, *, n, fixed, free, Sff, Sfb, Kf, Kb, Kft, cw) -> None:
+    def _set_parts(self, *, n, fixed, free, Sff, Sfb, Kb, Kft, cw) -> None:
         """Set every field but the factorization: the one place they are set.
 
         Every constructor (a subclass's too) sets them here, so that none
@@ -696,18 +701,25 @@ class AugmentedQuadratic(_FixedRows):
         free : ndarray of int64, shape (n - b,)
         Sff, Sfb : sparse matrices, shapes (n - b, n - b) and (n - b, b)
             ``S``'s free–free and free–fixed blocks.
-        Kf, Kb : sparse matrices, shapes (r, n - b) and (r, b)
-            The rows of ``K`` of positive weight, on the free and the fixed columns.
+        Kb : sparse matrix, shape (r, b)
+            The rows of ``K`` of positive weight on the fixed columns.
         Kft : sparse matrix, shape (n - b, r)
-            ``K_fᵀ``.
+            ``K_fᵀ``: those rows on the free columns, transposed (:attr:`Kf` is its
+            transposed view).
         cw : ndarray, shape (r,)
             ``c W``'s diagonal on those rows.
         """
         self.n, self.fixed, self.free = n, fixed, free
         self.backend = "pardiso"
         self.Sff, self.Sfb = Sff, Sfb
-        self.Kf, self.Kb, self.Kft = Kf, Kb, Kft
+        self.Kb, self.Kft = Kb, Kft
         self.cw = cw
+
+    @property
+    def Kf(self) -> sp.spmatrix:
+        """``K_f``, shape (r, n - b): the rows of ``K`` of positive weight on the free
+        columns, as :attr:`Kft`'s transposed view (no copy)."""
+        return self.Kft.T
 
     def _factor_augmented(self, A: sp.spmatrix) -> None:
         """Factor the augmented matrix ``A`` with Pardiso's LDLᵀ and check it by a probe solve.

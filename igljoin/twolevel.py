@@ -174,7 +174,6 @@ class _CoarseAugmented(AugmentedQuadratic):
             free=np.arange(n),
             Sff=S,
             Sfb=sp.csr_matrix((n, 0)),
-            Kf=Kf,
             Kb=sp.csr_matrix((len(keep), 0)),
             Kft=Kf.T,
             cw=weights[keep],

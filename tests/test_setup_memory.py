@@ -163,3 +163,43 @@ def test_a_fit_the_measures_share_is_made_once(monkeypatch):
     js = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
     assert made == [len(js.parts[0].seam)]
     assert _fits(js) == made
+
+
+@needs_pardiso
+def test_the_augmented_factorization_holds_the_band_rows_once(sample, monkeypatch):
+    monkeypatch.setattr(igljoin.solve, "AUGMENT_FROM_COUPLINGS", 0)
+    before, made = [], []
+
+    def live() -> list:
+        gc.collect()
+        return [m for m in gc.get_objects() if isinstance(m, sp.spmatrix)]
+
+    def augmented(S, *args, _make=linsolve.AugmentedQuadratic):
+        before.extend(live())
+        before.append(S)
+        return _make(S, *args)
+
+    def factored(A, *args, _pardiso=linsolve._Pardiso, **kwargs):
+        seen = {id(m) for m in before}
+        made.extend(m for m in live() if id(m) not in seen and m is not A)
+        return _pardiso(A, *args, **kwargs)
+
+    monkeypatch.setattr(igljoin.solve, "AugmentedQuadratic", augmented)
+    monkeypatch.setattr(linsolve, "_Pardiso", factored)
+    f = _solver(sample).factor
+    S = before[-1]
+    # when the factorization starts, the set-up's matrices are the parts the factor keeps
+    # (and S's own, which its caller holds): not the rows of positive weight, nor K_f
+    # beside K_fᵀ
+    kept = (f.Sff, f.Sfb, f.Kb, f.Kft)
+    extra = [
+        m for m in made if not any(m is k for k in kept) and not np.shares_memory(m.data, S.data)
+    ]
+    assert extra == []
+    # K_f is K_fᵀ's view, and the products through it are the formed K_f's, to the bit
+    assert np.shares_memory(f.Kf.data, f.Kft.data)
+    Kf = sp.csr_matrix(f.Kft.T)
+    for k in (1, 3):
+        x = np.random.default_rng(k).normal(size=(len(f.free), k))
+        assert np.array_equal(f.Kf @ x, Kf @ x)
+        assert np.array_equal(f.matvec(x), f.Sff @ x + f.Kft @ (f.cw[:, None] * (Kf @ x)))
