@@ -145,6 +145,45 @@ def _coarse_worker() -> ThreadPoolExecutor:
 os.register_at_fork(after_in_child=_coarse_worker.cache_clear)
 
 
+def _operator_clusters(term, labels: np.ndarray) -> tuple:
+    """The clusters every row of ``term``'s operator ``K`` reaches, and its size.
+
+    A rotation-aware shape term's ``K`` is the stack ``[L; D; −D]``
+    (:attr:`igljoin.terms.ShapeTerm.K`): its rows' clusters are found on ``L``
+    and ``D`` and put end to end (:func:`igljoin.coarse_kernels.row_clusters`
+    reads each row alone, so they are the stack's), and the stack is not made
+    for the count (at 1M guest vertices 0.26 GB, which a model that falls
+    back never reads).
+
+    Parameters
+    ----------
+    term : Term
+    labels : ndarray of int64, shape (n,)
+        Every vertex's cluster, -1 at a fixed vertex.
+
+    Returns
+    -------
+    K : scipy.sparse.csr_matrix or None
+        ``K`` itself, ``None`` for a stack (made from the term when read).
+    of_K : tuple
+        :func:`igljoin.coarse_kernels.row_clusters`'s ``(ptr, clusters, slot)`` of ``K``.
+    rows, nnz : int
+        ``K``'s rows and entries.
+    """
+    if not (isinstance(term, ShapeTerm) and term.rotation_aware):
+        K = sp.csr_matrix(term.K)
+        return K, ck.row_clusters(K.indptr, K.indices, labels, 1), K.shape[0], K.nnz
+    L, D = sp.csr_matrix(term.L), sp.csr_matrix(term.D)
+    of_L, of_D = (ck.row_clusters(M.indptr, M.indices, labels, 1) for M in (L, D))
+    parts = (of_L, of_D, of_D)  # −D's pattern is D's
+    ptr, start = [of_L[0]], of_L[0][-1]
+    for p in parts[1:]:
+        ptr.append(p[0][1:] + start)
+        start += p[0][-1]
+    of_K = (np.concatenate(ptr), *(np.concatenate([p[k] for p in parts]) for k in (1, 2)))
+    return None, of_K, L.shape[0] + 2 * D.shape[0], L.nnz + 2 * D.nnz
+
+
 class _CoarseAugmented(AugmentedQuadratic):
     """The augmented factorization of ``A_c = S + Uᵀ W U``, checked at ``A_c``'s accuracy.
 
@@ -700,6 +739,7 @@ class TwoLevelModel:
             if not self.fall_back:
                 raise OptionsError(message)
             self.fallback = message
+            self._let_go()
             return False
         t1 = time.perf_counter()
         # a rebuild lets the last factorization go first: the two together are the
@@ -736,7 +776,7 @@ class TwoLevelModel:
             self.fallback = f"{exc}; the iteration went on with the factored form alone"
             # the values, not the set-up, failed: a later solve makes a new model
             self.unsound = True
-            self.motions = self.factors = None
+            self._let_go()
             self._book(t1 - t0, t3 - t1, model, time.perf_counter() - t3)
             return False
         self.factorizations += 1
@@ -745,6 +785,17 @@ class TwoLevelModel:
             self.built_rotations = state.rotations[ls.free].copy()
         self._book(t1 - t0, t3 - t1, model, time.perf_counter() - t3)
         return first
+
+    def _let_go(self) -> None:
+        """Drop what only builds read once the model has fallen back to ``P`` alone.
+
+        Its :attr:`fallback` is then never cleared: the count's patterns and the
+        model's cache (at 1M guest vertices 0.73 GB) would be held unread to the end of
+        its use.
+        """
+        self.motions = self.factors = None
+        self._patterns = self._blocks = None
+        self._cache = {}
 
     def _book(self, clusters: float, coarse: float, model: float, factor: float) -> None:
         """Add a build's seconds to :attr:`seconds`: ``coarse`` includes ``model`` (the
@@ -782,11 +833,10 @@ class TwoLevelModel:
         local, wide, wide_entries, operators = [], [], 0, 0
         self._patterns = []
         for term in self.solver.terms:
-            K = sp.csr_matrix(term.K)
-            of_K = ck.row_clusters(K.indptr, K.indices, vertex_labels, 1)
+            K, of_K, count, nnz = _operator_clusters(term, vertex_labels)
             of_L = None
-            reach, count = len(of_K[1]), K.shape[0]
-            operators += K.nnz
+            reach = len(of_K[1])
+            operators += nnz
             if isinstance(term, ShapeTerm) and term.rotation_aware:
                 (Lptr, Lind, _), *_ = rotation_pattern(term, self._cache)
                 of_L = ck.row_clusters(Lptr, Lind, vertex_labels, 1)
@@ -911,6 +961,9 @@ class TwoLevelModel:
         wide_rows, wide_weights = [], []
         seconds = 0.0
         for term, (K, of_K, of_L), wide in zip(ls.terms, self._patterns, self._wide):
+            if K is None:
+                # a stacked operator, counted block by block: made at the first build
+                K = sp.csr_matrix(term.K)
             t0 = time.perf_counter()
             (_, directions, weights), rotation = factor_rows(term, state, self._cache)
             seconds += time.perf_counter() - t0

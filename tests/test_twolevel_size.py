@@ -6,7 +6,7 @@ import scipy.sparse as sp
 
 import igljoin
 from igljoin import coarse_kernels, linsolve, newton, twolevel
-from igljoin.terms import SmoothJoinTerm
+from igljoin.terms import ShapeTerm, SmoothJoinTerm
 
 from .test_twolevel import _left_out_apart, _solver
 
@@ -68,6 +68,7 @@ def test_the_rows_kept_apart_are_the_factor_rows_on_the_motions(patch):
     model.refresh(state, 1)
     A, free, w = model.A, newton.dofs(ls.free), model.motions.shape[2]
     for term, (K, of_K, _) in zip(ls.terms, model._patterns):
+        K = sp.csr_matrix(term.K) if K is None else K  # a stack is made from its term
         (_, directions, weights), _ = newton.factor_rows(term, state)
         D = weights.shape[1]
         directions = np.zeros((0, 3, 3)) if directions is None else directions
@@ -169,6 +170,38 @@ def test_auto_keeps_the_factored_form_when_the_coarse_system_is_too_large(monkey
     assert not said["in_use"] and said["builds"] == 0
     assert "AUTO_MAX_MODEL_ENTRIES" in said["fallback"]
     assert default.report()["coarse_model"] == {"in_use": False, "builds": 0, "fallback": None}
+
+
+def test_a_stacked_operators_clusters_are_counted_block_by_block(patch):
+    ls = patch.solver
+    shape = ls.terms[0]
+    assert isinstance(shape, ShapeTerm) and shape.rotation_aware
+    shape._K = None  # as the set-up leaves it
+    labels = np.full(ls.n, -1, dtype=np.int64)
+    labels[ls.free] = np.arange(len(ls.free)) % 7
+    K, of_K, rows, nnz = twolevel._operator_clusters(shape, labels)
+    assert K is None and shape._K is None  # the stack is not made for the count
+    # the stack's own clusters, the same integers
+    K = shape.K
+    expected = coarse_kernels.row_clusters(K.indptr, K.indices, labels, 1)
+    assert (rows, nnz) == (K.shape[0], K.nnz)
+    for got, want in zip(of_K, expected):
+        assert got.dtype == want.dtype and np.array_equal(got, want)
+
+
+def test_a_model_that_falls_back_lets_its_patterns_go(monkeypatch):
+    solver = _solver("partial_patch")
+    shape = solver.solver.terms[0]
+    monkeypatch.setattr(twolevel, "AUTO_FROM_VERTICES", 0)
+    monkeypatch.setattr(twolevel, "AUTO_MAX_MODEL_ENTRIES", 100)
+    model = twolevel.preferred_model(solver.solver, igljoin.JoinOptions(preconditioner="auto"))
+    assert not model.refresh(_start(solver), 1) and model.fallback
+    # nothing a build would read is held: not the patterns, the cache of the rotations'
+    # pattern, nor the shape term's stacked operator
+    assert model._patterns is None and model._blocks is None and model._cache == {}
+    assert shape._K is None
+    # and it stays P alone
+    assert not model.refresh(_start(solver), 1) and model.factorizations == 0
 
 
 @pardiso
