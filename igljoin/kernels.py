@@ -626,7 +626,8 @@ def smooth_local(
 def band_local(X, Kp, Ki, Kx, normal, outward, weights, tolerance, G):  # pragma: no cover
     """Band smooth-join term: return the energy, add the half-gradient ``Kᵀ W r``.
 
-    Row ``p`` of the sparse fit ``K`` (CSR arrays ``Kp``, ``Ki``, ``Kx``) gives
+    Row ``p`` of the sparse fit ``K`` (CSR arrays ``Kp``, ``Ki``, ``Kx``; ``Ki`` int32 or
+    int64, as scipy keeps it) gives
     the guest's direction off seam vertex ``p``, ``d = (K X)_p``; its target
     is the closest point in the half-plane (normal ``normal[p]``, outward
     ``outward[p]``) widened to a wedge of half-angle ``tolerance[p]``; its

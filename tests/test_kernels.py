@@ -142,6 +142,21 @@ def test_band_kernel_equals_numpy(tube, keep):
         assert np.abs(gk - gn).max() <= _G_REL * np.abs(gn).max()
 
 
+def test_band_kernel_reads_the_fits_own_columns(tube):
+    solver = _solver(tube, smooth_mode="band")
+    band = next(t for t in solver.terms if isinstance(t, SmoothJoinTerm))
+    # the columns the kernel reads are K's, not a copy of them in another integer type
+    assert np.shares_memory(band._Ki, band.K.indices) and band._Ki.dtype == np.int32
+    X = _perturbed(solver, 1.0, 7)
+    # and give what int64 columns gave, to the bit
+    out = []
+    for Ki in (band._Ki, band._Ki.astype(np.int64)):
+        G = np.zeros_like(X)
+        args = (band._Kp, Ki, band._Kx, band.normal, band.outward, band.weights, band._tol_c)
+        out.append((kernels.band_local(X, *args, G), G))
+    assert out[0][0] == out[1][0] and np.array_equal(out[0][1], out[1][1])
+
+
 def test_numpy_path_gives_the_same_join(tube):
     """Terms switched to their numpy reference path (``compiled=False``) give the same join."""
     reference = _solver(tube)
