@@ -16,6 +16,7 @@ so adding a term never touches the solver.
 
 from __future__ import annotations
 
+import functools
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 
@@ -385,15 +386,13 @@ class ShapeTerm(Term):
         # rows: Laplacians, then one-ring edges i->j (owned by i) and j->i (owned by j)
         self.weights = np.concatenate([np.full(n, self.weight), np.full(2 * ne, self.weight * mu)])
         self.rest_edges = V0[self.E[:, 0]] - V0[self.E[:, 1]]
-        # structure-of-arrays copies for the vectorised local step
-        self._deltaT = np.ascontiguousarray(self.delta.T)
-        self._e0T = np.ascontiguousarray(self.rest_edges.T)
         self._covariance = None
         # arrays of the compiled local step (igljoin.kernels)
         self.compiled = bool(compiled)
         if self.compiled:
+            # L's own columns (int32 where scipy keeps them so; the kernels read either)
             self._Lp = self.L.indptr.astype(np.int64)
-            self._Li = self.L.indices.astype(np.int64)
+            self._Li = np.ascontiguousarray(self.L.indices)
             self._Lx = np.ascontiguousarray(self.L.data, dtype=np.float64)
             self._E_c = np.ascontiguousarray(self.E)
             self._delta_c = np.ascontiguousarray(self.delta, dtype=np.float64)
@@ -417,6 +416,18 @@ class ShapeTerm(Term):
                 format="csr",
             )
         return self._covariance
+
+    # structure-of-arrays copies for the vectorised numpy local step, made on its first
+    # use (the compiled one reads delta and rest_edges: at 1M guest vertices 0.10 GB)
+    @functools.cached_property
+    def _deltaT(self) -> np.ndarray:
+        """``δᵀ``, shape (3, n), contiguous."""
+        return np.ascontiguousarray(self.delta.T)
+
+    @functools.cached_property
+    def _e0T(self) -> np.ndarray:
+        """The rest edges transposed, shape (3, e), contiguous."""
+        return np.ascontiguousarray(self.rest_edges.T)
 
     @property
     def K(self) -> sp.csr_matrix:

@@ -157,6 +157,21 @@ def test_band_kernel_reads_the_fits_own_columns(tube):
     assert out[0][0] == out[1][0] and np.array_equal(out[0][1], out[1][1])
 
 
+def test_shape_term_holds_no_copy_the_compiled_step_does_not_read(tube):
+    solver = _solver(tube)
+    shape = solver.terms[0]
+    assert isinstance(shape, ShapeTerm) and shape.compiled and shape.rotation_aware
+    solver.solve()
+    # the numpy step's transposed copies were never made, and the Laplacian's columns
+    # are L's own
+    assert "_deltaT" not in vars(shape) and "_e0T" not in vars(shape)
+    assert np.shares_memory(shape._Li, shape.L.indices)
+    # the numpy step makes them where it first reads them
+    _both(shape, _perturbed(solver, 0.1, 3))
+    assert np.array_equal(shape._deltaT, shape.delta.T) and shape._deltaT.flags.c_contiguous
+    assert np.array_equal(shape._e0T, shape.rest_edges.T) and shape._e0T.flags.c_contiguous
+
+
 def test_numpy_path_gives_the_same_join(tube):
     """Terms switched to their numpy reference path (``compiled=False``) give the same join."""
     reference = _solver(tube)
