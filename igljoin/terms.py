@@ -57,6 +57,7 @@ __all__ = [
     "StretchTerm",
     "SmoothJoinTerm",
     "unique_edges",
+    "difference_operators",
     "edge_stiffness",
     "band_couplings",
     "MAX_BAND_COUPLINGS",
@@ -272,6 +273,27 @@ def _difference_operator(E: np.ndarray, n: int) -> sp.csr_matrix:
     return sp.csr_matrix((vals, (rows, E.reshape(-1))), shape=(e, n))
 
 
+def difference_operators(E: np.ndarray, n: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """The edges' difference operator ``D`` (``(D X)_e = X[E[e, 0]] − X[E[e, 1]]``) and ``Dᵀ``.
+
+    Made once and passed to the terms that read them (the rotation-aware
+    shape term's one-ring rows, the stretch term's ``K``), so that they share one.
+
+    Parameters
+    ----------
+    E : ndarray of int64, shape (e, 2)
+    n : int
+        Vertices.
+
+    Returns
+    -------
+    D : scipy.sparse.csr_matrix, shape (e, n)
+    Dt : scipy.sparse.csr_matrix, shape (n, e)
+    """
+    D = _difference_operator(np.asarray(E, dtype=np.int64), n)
+    return D, sp.csr_matrix(D.T)
+
+
 def edge_stiffness(
     E: np.ndarray, F: np.ndarray, stiffness: np.ndarray | None, on: str
 ) -> np.ndarray:
@@ -336,6 +358,9 @@ class ShapeTerm(Term):
     E : ndarray of int64, shape (e, 2), optional
         The mesh's unique edges (``unique_edges(F)``); pass the array the
         stretch term uses so that both share one ``D X`` per local step.
+    differences : tuple of scipy.sparse.csr_matrix, optional
+        ``difference_operators(E, n)``, shared with the stretch term (made here
+        when not given).
     compiled : bool
         Run the local step by the compiled kernels (:mod:`igljoin.kernels`,
         default); ``False`` runs the numpy reference path, which the tests
@@ -351,7 +376,15 @@ class ShapeTerm(Term):
     name = "shape"
 
     def __init__(
-        self, V0, F, weight=1.0, laplacian="uniform", rotation_aware=True, E=None, compiled=True
+        self,
+        V0,
+        F,
+        weight=1.0,
+        laplacian="uniform",
+        rotation_aware=True,
+        E=None,
+        compiled=True,
+        differences=None,
     ):
         n = len(V0)
         self.n = n
@@ -381,8 +414,7 @@ class ShapeTerm(Term):
             return
         mu = ROTATION_REGULARISATION
         ne = len(self.E)
-        self.D = _difference_operator(self.E, n)
-        self.Dt = sp.csr_matrix(self.D.T)
+        self.D, self.Dt = differences or difference_operators(self.E, n)
         # rows: Laplacians, then one-ring edges i->j (owned by i) and j->i (owned by j)
         self.weights = np.concatenate([np.full(n, self.weight), np.full(2 * ne, self.weight * mu)])
         self.rest_edges = V0[self.E[:, 0]] - V0[self.E[:, 1]]
@@ -600,6 +632,9 @@ class StretchTerm(Term):
         ``k_ij`` (already multiplied by the stretch weight).
     compiled : bool
         Compiled local step (default) or the numpy reference path.
+    differences : tuple of scipy.sparse.csr_matrix, optional
+        ``difference_operators(E, n)`` (its ``K`` and ``Kᵀ``), shared with the
+        shape term (made here when not given).
     """
 
     name = "stretch"
@@ -612,10 +647,9 @@ class StretchTerm(Term):
     #: A collapsed edge keeps its rest direction turned by its first vertex's rotation.
     reads_rotations = True
 
-    def __init__(self, V0, E, stiffness, compiled=True):
+    def __init__(self, V0, E, stiffness, compiled=True, differences=None):
         self.E = E
-        self.K = _difference_operator(E, len(V0))
-        self.Kt = sp.csr_matrix(self.K.T)
+        self.K, self.Kt = differences or difference_operators(E, len(V0))
         self.weights = np.asarray(stiffness, dtype=np.float64)
         self.rest = np.ascontiguousarray(self.K @ V0)
         self.rest_length = np.linalg.norm(self.rest, axis=1)

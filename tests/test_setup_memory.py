@@ -203,3 +203,13 @@ def test_the_augmented_factorization_holds_the_band_rows_once(sample, monkeypatc
         x = np.random.default_rng(k).normal(size=(len(f.free), k))
         assert np.array_equal(f.Kf @ x, Kf @ x)
         assert np.array_equal(f.matvec(x), f.Sff @ x + f.Kft @ (f.cw[:, None] * (Kf @ x)))
+
+
+def test_the_shape_and_stretch_terms_share_one_difference_operator(sample):
+    shape, stretch = _solver(sample).terms[:2]
+    assert isinstance(shape, ShapeTerm) and isinstance(stretch, StretchTerm)
+    assert stretch.K is shape.D and stretch.Kt is shape.Dt
+    # the operators each made for itself, to the bit
+    alone = StretchTerm(np.zeros((shape.n, 3)), stretch.E, 1.0)  # D reads E and n alone
+    assert alone.K is not shape.D
+    assert _same(alone.K, shape.D) and _same(alone.Kt, shape.Dt)
