@@ -657,6 +657,33 @@ class StretchTerm(Term):
         if self.compiled:
             self.E = np.ascontiguousarray(E, dtype=np.int64)
 
+    def share_rest(self, edges: np.ndarray) -> bool:
+        """Hold ``edges`` as its rest edges ``D V0`` where they are its own to the bit.
+
+        The rotation-aware shape term's rest edges ``V0[E0] − V0[E1]`` are
+        (they may differ only in the sign of a zero): one array then serves
+        both (at 1M guest vertices 0.07 GB).
+
+        Parameters
+        ----------
+        edges : ndarray, shape (e, 3)
+
+        Returns
+        -------
+        bool
+            Whether they are held.
+        """
+        edges = np.asarray(edges)
+        same = (
+            edges.dtype == np.float64
+            and edges.flags.c_contiguous
+            and edges.shape == self.rest.shape
+            and np.array_equal(edges.view(np.uint64), self.rest.view(np.uint64))
+        )
+        if same:
+            self.rest = edges
+        return same
+
     def applied(self, state: LocalState) -> np.ndarray:
         """Edge vectors ``D X``, shape (e, 3), shared with the shape term."""
         return _edge_vectors(state, self.E, self.K, self.compiled)

@@ -213,3 +213,18 @@ def test_the_shape_and_stretch_terms_share_one_difference_operator(sample):
     alone = StretchTerm(np.zeros((shape.n, 3)), stretch.E, 1.0)  # D reads E and n alone
     assert alone.K is not shape.D
     assert _same(alone.K, shape.D) and _same(alone.Kt, shape.Dt)
+
+
+def test_the_stretch_term_holds_the_shape_terms_rest_edges_where_they_are_its_own(sample):
+    js = igljoin.JoinSolver(sample.host, sample.guest, sample.host_curve, sample.guest_curve)
+    shape, stretch = js.terms[:2]
+    assert stretch.rest is shape.rest_edges
+    # they are the edges it made itself, D V0, to the bit
+    own = np.ascontiguousarray(stretch.K @ js.corr.V)
+    assert np.array_equal(own.view(np.uint64), stretch.rest.view(np.uint64))
+    # edges that differ from its own in the sign of a zero alone are not taken
+    edges = shape.rest_edges.copy()
+    zero = tuple(np.argwhere(edges == 0.0)[0])
+    edges[zero] = -edges[zero]
+    kept = stretch.rest
+    assert not stretch.share_rest(edges) and stretch.rest is kept
