@@ -380,7 +380,8 @@ def build_terms(inputs: TermInputs) -> JoinTerms:
     terms = [term for term, _ in built]
     check_order(terms)
     shape = [t for t in terms if isinstance(t, ShapeTerm) and t.rotation_aware]
-    for term in terms:
-        if shape and isinstance(term, StretchTerm):
-            term.share_rest(shape[0].rest_edges)
+    if shape:
+        for term in terms:
+            if isinstance(term, StretchTerm):
+                term.share_rest(shape[0].rest_edges)
     return JoinTerms(terms, [removed for _, removed in built if removed is not None])

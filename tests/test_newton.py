@@ -118,6 +118,20 @@ def test_the_model_is_counted_and_refused_past_its_limit_before_it_is_built(patc
     assert assemble(ls.terms, state, ls.n).nnz <= count
 
 
+def test_counting_a_shape_term_leaves_no_stacked_operator(patch):
+    from igljoin.terms import ShapeTerm, band_couplings
+
+    ls = igljoin.JoinSolver(patch.host, patch.guest, patch.host_curve, patch.guest_curve).solver
+    (shape,) = [t for t in ls.terms if isinstance(t, ShapeTerm)]
+    assert shape.rotation_aware and shape._K is None
+    count = newton.assembled_entries(ls.terms)
+    # the count made no stack [L; D; −D] for the term to keep (0.26 GB at 1M) ...
+    assert shape._K is None
+    # ... and counts the pairs the stack couples: the same float, to the bit
+    assert band_couplings(newton._counted_rows(shape)) == band_couplings(shape.K)
+    assert count == newton.assembled_entries(ls.terms)
+
+
 def test_the_largest_model_the_benchmark_builds_is_allowed():
     # the benchmark's 10k patch (pipelines/benchmark.py: ~1,180 guest vertices per
     # guest_resolution²), whose Gauss–Newton model it builds; counting builds nothing
