@@ -48,6 +48,7 @@ from .terms import (
     SmoothJoinTerm,
     StretchTerm,
     band_couplings,
+    row_patterns,
 )
 
 __all__ = [
@@ -355,7 +356,7 @@ def factor_entries(term) -> int:
     -------
     int
     """
-    nnz = sp.csr_matrix(term.K).nnz
+    nnz = sum(block.nnz for block in row_patterns(term))
     D = row_directions(term)
     # K ⊗ I₃ (D = 3) holds one entry per entry of K in each of its three rows; each of the
     # D factors of rows K_r ⊗ d three
@@ -393,13 +394,13 @@ def assembled_entries(terms: list) -> int:
 def _counted_rows(term) -> sp.csr_matrix:
     """Rows with the pattern of ``term``'s ``Kᵀ K``, for the count.
 
-    A rotation-aware shape term's ``K`` is the stack ``[L; D; −D]``, which it
-    keeps once made (0.26 GB at 1M guest vertices); ``[L; D]`` couples the
-    same pairs (``−D``'s rows are ``D``'s pattern) and is let go after the count.
+    A rotation-aware shape term's ``K`` is a stack it keeps once made (0.26 GB
+    at 1M guest vertices); its blocks' patterns
+    (:func:`igljoin.terms.row_patterns`) stacked for the count couple the
+    same pairs and are let go after it.
     """
-    if isinstance(term, ShapeTerm) and term.rotation_aware:
-        return sp.csr_matrix(sp.vstack([term.L, term.D], format="csr"))
-    return sp.csr_matrix(term.K)
+    blocks = row_patterns(term)
+    return blocks[0] if len(blocks) == 1 else sp.csr_matrix(sp.vstack(blocks, format="csr"))
 
 
 def gauss_newton(terms: list, state: LocalState, n: int) -> sp.csr_matrix:

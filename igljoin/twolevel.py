@@ -56,7 +56,7 @@ from .newton import (
     rotation_pattern,
     row_directions,
 )
-from .terms import ShapeTerm
+from .terms import ShapeTerm, row_patterns
 
 __all__ = [
     "clusters",
@@ -148,12 +148,12 @@ os.register_at_fork(after_in_child=_coarse_worker.cache_clear)
 def _operator_clusters(term, labels: np.ndarray) -> tuple:
     """The clusters every row of ``term``'s operator ``K`` reaches, and its size.
 
-    A rotation-aware shape term's ``K`` is the stack ``[L; D; −D]``
-    (:attr:`igljoin.terms.ShapeTerm.K`): its rows' clusters are found on ``L``
-    and ``D`` and put end to end (:func:`igljoin.coarse_kernels.row_clusters`
-    reads each row alone, so they are the stack's), and the stack is not made
-    for the count (at 1M guest vertices 0.26 GB, which a model that falls
-    back never reads).
+    Found block by block on the patterns of the rows ``K`` stacks
+    (:func:`igljoin.terms.row_patterns`) and put end to end
+    (:func:`igljoin.coarse_kernels.row_clusters` reads each row alone, so they
+    are the stack's): a rotation-aware shape term's stack ``[L; D; −D]`` is not
+    made for the count (at 1M guest vertices 0.26 GB, which a model that
+    falls back never reads).
 
     Parameters
     ----------
@@ -163,25 +163,27 @@ def _operator_clusters(term, labels: np.ndarray) -> tuple:
 
     Returns
     -------
-    K : scipy.sparse.csr_matrix or None
-        ``K`` itself, ``None`` for a stack (made from the term when read).
     of_K : tuple
         :func:`igljoin.coarse_kernels.row_clusters`'s ``(ptr, clusters, slot)`` of ``K``.
     rows, nnz : int
         ``K``'s rows and entries.
     """
-    if not (isinstance(term, ShapeTerm) and term.rotation_aware):
-        K = sp.csr_matrix(term.K)
-        return K, ck.row_clusters(K.indptr, K.indices, labels, 1), K.shape[0], K.nnz
-    L, D = sp.csr_matrix(term.L), sp.csr_matrix(term.D)
-    of_L, of_D = (ck.row_clusters(M.indptr, M.indices, labels, 1) for M in (L, D))
-    parts = (of_L, of_D, of_D)  # −D's pattern is D's
-    ptr, start = [of_L[0]], of_L[0][-1]
-    for p in parts[1:]:
-        ptr.append(p[0][1:] + start)
-        start += p[0][-1]
-    of_K = (np.concatenate(ptr), *(np.concatenate([p[k] for p in parts]) for k in (1, 2)))
-    return None, of_K, L.shape[0] + 2 * D.shape[0], L.nnz + 2 * D.nnz
+    blocks = row_patterns(term)
+    found: dict[int, tuple] = {}  # a pattern repeated (−D's is D's) is read once
+    parts = []
+    for M in blocks:
+        if id(M) not in found:
+            found[id(M)] = ck.row_clusters(M.indptr, M.indices, labels, 1)
+        parts.append(found[id(M)])
+    if len(parts) == 1:
+        of_K = parts[0]
+    else:
+        ptr, start = [parts[0][0]], parts[0][0][-1]
+        for p in parts[1:]:
+            ptr.append(p[0][1:] + start)
+            start += p[0][-1]
+        of_K = (np.concatenate(ptr), *(np.concatenate([p[k] for p in parts]) for k in (1, 2)))
+    return of_K, sum(M.shape[0] for M in blocks), sum(M.nnz for M in blocks)
 
 
 class _CoarseAugmented(AugmentedQuadratic):
@@ -833,7 +835,7 @@ class TwoLevelModel:
         local, wide, wide_entries, operators = [], [], 0, 0
         self._patterns = []
         for term in self.solver.terms:
-            K, of_K, count, nnz = _operator_clusters(term, vertex_labels)
+            of_K, count, nnz = _operator_clusters(term, vertex_labels)
             of_L = None
             reach = len(of_K[1])
             operators += nnz
@@ -853,7 +855,7 @@ class TwoLevelModel:
                 wide_entries += row_directions(term) * w * reach
             else:
                 local += [p[:2] for p in (of_K, of_L) if p is not None]
-            self._patterns.append((K, of_K, of_L))
+            self._patterns.append((of_K, of_L))
         self._blocks = ck.block_pattern(local, a)
         self.coarse_entries = int(w * w * len(self._blocks[1]) + wide_entries)
         # besides the coarse system: the operators' cluster patterns, every free vertex's
@@ -960,10 +962,9 @@ class TwoLevelModel:
         out = np.zeros((len(bcols), w, w))
         wide_rows, wide_weights = [], []
         seconds = 0.0
-        for term, (K, of_K, of_L), wide in zip(ls.terms, self._patterns, self._wide):
-            if K is None:
-                # a stacked operator, counted block by block: made at the first build
-                K = sp.csr_matrix(term.K)
+        for term, (of_K, of_L), wide in zip(ls.terms, self._patterns, self._wide):
+            # a stacked operator (counted block by block) is made here, where it is read
+            K = sp.csr_matrix(term.K)
             t0 = time.perf_counter()
             (_, directions, weights), rotation = factor_rows(term, state, self._cache)
             seconds += time.perf_counter() - t0

@@ -125,8 +125,10 @@ def test_counting_a_shape_term_leaves_no_stacked_operator(patch):
     (shape,) = [t for t in ls.terms if isinstance(t, ShapeTerm)]
     assert shape.rotation_aware and shape._K is None
     count = newton.assembled_entries(ls.terms)
-    # the count made no stack [L; D; −D] for the term to keep (0.26 GB at 1M) ...
+    entries = sum(newton.factor_entries(t) for t in ls.terms)
+    # neither count made a stack [L; D; −D] for the term to keep (0.26 GB at 1M) ...
     assert shape._K is None
+    assert entries == sum(newton.factor_entries(t) for t in ls.terms)  # with the stack made
     # ... and counts the pairs the stack couples: the same float, to the bit
     assert band_couplings(newton._counted_rows(shape)) == band_couplings(shape.K)
     assert count == newton.assembled_entries(ls.terms)

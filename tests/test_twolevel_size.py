@@ -67,8 +67,8 @@ def test_the_rows_kept_apart_are_the_factor_rows_on_the_motions(patch):
     model = twolevel.TwoLevelModel(ls, cluster_size=5, bending=True)
     model.refresh(state, 1)
     A, free, w = model.A, newton.dofs(ls.free), model.motions.shape[2]
-    for term, (K, of_K, _) in zip(ls.terms, model._patterns):
-        K = sp.csr_matrix(term.K) if K is None else K  # a stack is made from its term
+    for term, (of_K, _) in zip(ls.terms, model._patterns):
+        K = sp.csr_matrix(term.K)
         (_, directions, weights), _ = newton.factor_rows(term, state)
         D = weights.shape[1]
         directions = np.zeros((0, 3, 3)) if directions is None else directions
@@ -100,7 +100,7 @@ def test_the_count_is_the_coarse_matrix_held(patch):
     # and besides it what the model keeps: one cluster slot per entry of the operators
     # (and of the Laplacian), every free vertex's motions; no factor of the Gauss–Newton
     # model (the additive form projects the operators' rows without forming them)
-    slots = sum(len(K[2]) + (0 if L is None else len(L[2])) for _, K, L in model._patterns)
+    slots = sum(len(K[2]) + (0 if L is None else len(L[2])) for K, L in model._patterns)
     assert model.model_entries == model.coarse_entries + slots + model.motions.size
     assert model.factors is None
     # the balancing form keeps the factors for its products with H, and counts them
@@ -179,8 +179,8 @@ def test_a_stacked_operators_clusters_are_counted_block_by_block(patch):
     shape._K = None  # as the set-up leaves it
     labels = np.full(ls.n, -1, dtype=np.int64)
     labels[ls.free] = np.arange(len(ls.free)) % 7
-    K, of_K, rows, nnz = twolevel._operator_clusters(shape, labels)
-    assert K is None and shape._K is None  # the stack is not made for the count
+    of_K, rows, nnz = twolevel._operator_clusters(shape, labels)
+    assert shape._K is None  # the stack is not made for the count
     # the stack's own clusters, the same integers
     K = shape.K
     expected = coarse_kernels.row_clusters(K.indptr, K.indices, labels, 1)
