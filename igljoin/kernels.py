@@ -820,17 +820,17 @@ def _place_rows(X, rows, values):  # pragma: no cover - compiled
 
 @nb.njit(cache=True)
 def step(x, t, d):  # pragma: no cover - compiled
-    """``x + t * d`` for two C-contiguous arrays of one shape, in a new array.
+    """``x + t * d`` for two arrays of one shape (m, k), in a new C-ordered array.
 
     Each entry is the product rounded, then the sum (as numpy's two
-    operations round them: no fused multiply-add).
+    operations round them: no fused multiply-add). Indexed entry by entry,
+    so any memory order reads right (a flattened view of a non-C array would
+    be a copy, and the sums written into it lost).
     """
-    out = np.empty_like(x)
-    a = x.ravel()
-    b = d.ravel()
-    o = out.ravel()
-    for i in range(a.shape[0]):
-        o[i] = a[i] + t * b[i]
+    out = np.empty(x.shape)
+    for i in range(x.shape[0]):
+        for j in range(x.shape[1]):
+            out[i, j] = x[i, j] + t * d[i, j]
     return out
 
 

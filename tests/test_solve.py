@@ -775,6 +775,9 @@ def test_row_and_step_kernels_are_their_numpy_expressions():
     d = rng.normal(size=(900, 3))
     for t in (1.0, 0.5, 0.1234567):
         assert np.array_equal(kernels.step(x, t, d), x + t * d)
+    # any memory order: a Fortran-ordered x, a strided d
+    xf, ds = np.asfortranarray(x), np.repeat(d, 2, axis=0)[::2]
+    assert np.array_equal(kernels.step(xf, 0.3, ds), x + 0.3 * d)
     assert kernels.abs_max(d) == np.abs(d).max()
     d[5, 1] = np.nan
     assert np.isnan(kernels.abs_max(d)) and np.isnan(np.abs(d).max())
