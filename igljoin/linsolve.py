@@ -451,16 +451,9 @@ class _Pardiso:
 class _FixedRows:
     """What the factored forms share: the free / fixed split and the solve with fixed rows.
 
-    A subclass sets :attr:`n`, :attr:`free` and :attr:`fixed` (through
-    :meth:`_split`, or from :meth:`_blocks`) and provides ``solve_free`` and
-    ``coupled``.
+    A subclass sets :attr:`n`, :attr:`free` and :attr:`fixed` (from
+    :meth:`_blocks`) and provides ``solve_free`` and ``coupled``.
     """
-
-    def _split(self, M: sp.spmatrix, fixed: np.ndarray):
-        """Set ``n``, ``fixed``, ``free``; return ``M``'s free–free and free–fixed blocks."""
-        self.n = M.shape[0]
-        self.fixed, self.free, Mff, Mfb = self._blocks(M, fixed)
-        return Mff, Mfb
 
     @staticmethod
     def _blocks(M: sp.spmatrix, fixed: np.ndarray) -> tuple:
@@ -537,8 +530,8 @@ class FixedQuadratic(_FixedRows):
 
     def __init__(self, Q: sp.spmatrix, fixed: np.ndarray, backend: str = "auto"):
         Q = sp.csr_matrix(Q)
-        n = Q.shape[0]
-        self.Qff, self.Qfb = self._split(Q, fixed)
+        n = self.n = Q.shape[0]
+        self.fixed, self.free, self.Qff, self.Qfb = self._blocks(Q, fixed)
         self.backend = resolve_backend(backend, self.Qff.nnz)
         if not self.free.size:
             return
