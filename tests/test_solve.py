@@ -798,11 +798,15 @@ def test_a_quasi_newton_memory_copy_is_independent():
     other.push(x + 2 * s, x, g + 3 * s, g)
     other.clear()
     assert memory.size == 1 and other.size == 0
-    # every attribute copied, none shared (a field added later is copied too)
+    # every attribute copied, none shared (a field added later is copied too): the
+    # arrays and lists are new objects, everything else an immutable value (a dict or
+    # another mutable field added later fails here until copy() copies it)
     assert vars(other).keys() == vars(memory).keys()
     for key, value in vars(memory).items():
         if isinstance(value, (np.ndarray, list)):
             assert vars(other)[key] is not value, key
+        else:
+            assert isinstance(value, (int, float, bool, str, tuple, type(None))), key
 
 
 # -- a refused change leaves the solver as it was --------------------------------------------
