@@ -118,6 +118,20 @@ def test_the_model_is_counted_and_refused_past_its_limit_before_it_is_built(patc
     assert assemble(ls.terms, state, ls.n).nnz <= count
 
 
+@pytest.mark.parametrize(
+    "sample", [("end_to_end", "equal"), ("partial_patch", "longer")], ids=["tube", "patch"]
+)
+def test_the_count_does_not_fall_short_of_the_assembled_model(sample):
+    # the count samples 64 columns per operator (terms.band_couplings) and counts nine
+    # per pair of every term, the matrix stores the union: on a tube (smooth-join band
+    # rows all around) and on a patch other than the fixture's
+    s = phantoms.paper_sample(*sample, resolution=0.4)
+    solver = igljoin.JoinSolver(s.host, s.guest, s.host_curve, s.guest_curve)
+    ls = solver.solver
+    state = ls.local(solver.initial_guess())[0]
+    assert newton.gauss_newton(ls.terms, state, ls.n).nnz <= newton.assembled_entries(ls.terms)
+
+
 def test_counting_a_shape_term_leaves_no_stacked_operator(patch):
     from igljoin.terms import ShapeTerm, band_couplings
 
