@@ -858,3 +858,44 @@ def take_rows(G, rows):  # pragma: no cover - compiled
         out[k, 1] = G[r, 1]
         out[k, 2] = G[r, 2]
     return out
+
+
+@nb.njit(cache=True)
+def abs_row_sums(ptr, val):  # pragma: no cover - compiled
+    """Every row's ``Σ_k |A_ik|`` of a CSR matrix (its ``indptr``, ``data``), shape (n,).
+
+    The stored entries in their order (duplicates apart), without the ``(nnz,)``
+    temporaries of ``np.bincount`` over ``np.abs(data)``, whose sums it equals.
+    """
+    n = ptr.shape[0] - 1
+    out = np.zeros(n)
+    for i in range(n):
+        s = 0.0
+        for k in range(ptr[i], ptr[i + 1]):
+            s += abs(val[k])
+        out[i] = s
+    return out
+
+
+@nb.njit(cache=True)
+def gram_row_bound(ptr, idx, val, weights, n):  # pragma: no cover - compiled
+    """``max_j Σ_i |w_i| |K_ij| Σ_k |K_ik|``: a bound of ``Kᵀ diag(w) K``'s rows' absolute sums.
+
+    ``K`` in CSR (``indptr``, ``indices``, ``data``, ``n`` columns), ``weights``
+    one per row. Row ``j`` of ``Kᵀ W K`` sums ``|Σ_i K_ij w_i K_il|`` over ``l``,
+    at most ``Σ_i |w_i| |K_ij| Σ_l |K_il|``; so the largest is a bound of its
+    largest eigenvalue (Gershgorin) without forming the product.
+    """
+    col = np.zeros(n)
+    for i in range(ptr.shape[0] - 1):
+        r = 0.0
+        for k in range(ptr[i], ptr[i + 1]):
+            r += abs(val[k])
+        a = abs(weights[i]) * r
+        for k in range(ptr[i], ptr[i + 1]):
+            col[idx[k]] += a * abs(val[k])
+    m = 0.0
+    for j in range(n):
+        if col[j] > m:
+            m = col[j]
+    return m

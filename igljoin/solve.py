@@ -195,9 +195,12 @@ class LocalGlobalSolver:
             # factored; their plain sum (Q's rest) is not made here. Each is made again
             # where it is used (_rest)
             w = self.wide
+            scaled_rest = self._rest(scaled=True)
+            self._stiffness_bound = _kept_apart_stiffness_bound(terms, w, scaled_rest)
             self.factor = AugmentedQuadratic(
-                self._rest(scaled=True), w.K, w.weights, w.preconditioner_scale, self.fixed
+                scaled_rest, w.K, w.weights, w.preconditioner_scale, self.fixed
             )
+            del scaled_rest
             self._plain_factor = None
         self.factorizations = 1
         self.backend = self.factor.backend
@@ -227,10 +230,11 @@ class LocalGlobalSolver:
         ``Σ K_tᵀ W_t K_t`` (the plain step's, ``Q``'s and the energy floor's) or,
         ``scaled``, ``Σ c_t K_tᵀ W_t K_t`` (``P``'s), shape (n, n). Not kept: the
         factorization holds its own copy of the scaled one's free rows, and the
-        plain one is read once per run at most (the floor) and by the plain
-        factorization (once); on the 1M-vertex tube each is 0.36 GB. Made again
-        it costs the run 0.03 s on a 30k-vertex patch guest and 0.12 s at 100k
-        (1-2 % of their solves).
+        plain one is read by the energy floor (only of a run whose energy falls
+        below :meth:`stiffness_bound`'s bound of it: a guest already in place) and
+        by the plain factorization (once); on the 1M-vertex tube each is
+        0.36 GB. Made again it costs 0.03 s on a 30k-vertex patch guest and
+        0.12 s at 100k.
         """
         others = [term for term in self.terms if term is not self.wide]
         Q, P = _summed(others, self.n, plain=not scaled, scaled=scaled)
@@ -288,19 +292,18 @@ class LocalGlobalSolver:
         return out[:, 0]
 
     def stiffness_bound(self) -> float | None:
-        """An upper bound of ``Q``'s largest eigenvalue (its largest absolute row sum), made once.
+        """An upper bound of ``Q``'s largest eigenvalue, made once.
 
-        ``None`` where ``Q`` is not formed (the band block kept apart).
+        ``Q``'s largest absolute row sum; with the band block kept apart, made
+        at set-up without forming ``Q`` (:func:`_kept_apart_stiffness_bound`),
+        ``None`` if the preconditioner's scales do not allow it.
         """
-        if self.wide is not None:
-            return None
-        if self._stiffness_bound is None:
+        if self._stiffness_bound is None and self.wide is None:
             # read from the stored entries (duplicates counted apart: a larger bound, still
             # one); scipy's abs() would sort Q's indices in place, and with them the
             # order its products sum in
             Q = self.Q
-            rows = np.repeat(np.arange(Q.shape[0]), np.diff(Q.indptr))
-            sums = np.bincount(rows, weights=np.abs(Q.data), minlength=Q.shape[0])
+            sums = kernels.abs_row_sums(Q.indptr, Q.data)
             self._stiffness_bound = float(sums.max(initial=0.0))
         return self._stiffness_bound
 
@@ -618,6 +621,43 @@ def _summed(
         if scaled:
             P = P + term.preconditioner_scale * block
     return (sp.csr_matrix(Q) if plain else None), (sp.csr_matrix(P) if scaled else None)
+
+
+def _kept_apart_stiffness_bound(
+    terms: list[Term], wide: Term, scaled_rest: sp.csr_matrix
+) -> float | None:
+    """An upper bound of ``Q``'s largest eigenvalue with ``wide``'s block kept apart.
+
+    ``Q = Q_rest + Kᵀ W K``: ``Q_rest``, the other terms' sum of positive
+    semidefinite blocks, is below their scaled sum ``P_rest`` (``scaled_rest``)
+    divided by the smallest scale ``c_t``, so its largest eigenvalue is at most
+    ``P_rest``'s largest absolute row sum over ``c_t``; ``Kᵀ W K``'s at most its
+    rows' bound (:func:`igljoin.kernels.gram_row_bound`). Their sum bounds
+    ``Q``'s (Weyl), without forming either block: the energy floor's test then
+    rarely makes ``Q_rest`` again (0.12 s a run of a 100k-vertex guest).
+
+    Parameters
+    ----------
+    terms : list of Term
+        The join's terms, ``wide`` among them.
+    wide : Term
+        The term kept apart (its ``K``, ``weights``).
+    scaled_rest : scipy.sparse.csr_matrix, shape (n, n)
+        ``Σ c_t K_tᵀ W_t K_t`` over the other terms.
+
+    Returns
+    -------
+    float or None
+        ``None`` where a scale is not positive (no such bound).
+    """
+    scales = [t.preconditioner_scale for t in terms if t is not wide]
+    smallest = min(scales, default=1.0)
+    if not smallest > 0.0:
+        return None
+    rest = kernels.abs_row_sums(scaled_rest.indptr, scaled_rest.data).max(initial=0.0)
+    K = sp.csr_matrix(wide.K)
+    band = kernels.gram_row_bound(K.indptr, K.indices, K.data, wide.weights, K.shape[1])
+    return float(rest / smallest + band)
 
 
 def _wide_term(terms: list[Term], linear_solver: str) -> Term | None:

@@ -272,3 +272,25 @@ def test_stretch_term_reads_the_edge_vectors_the_shape_term_left(tube, monkeypat
     e_alone = stretch.local_into(alone, G_alone)
     # the same differences of the same positions: equal to the last bit
     assert e_shared == e_alone and np.array_equal(G_shared, G_alone)
+
+
+def test_row_sums_and_the_gram_bound():
+    """``abs_row_sums`` is numpy's sum of the stored entries' magnitudes, row by row, to the
+    bit; ``gram_row_bound`` bounds every row's absolute sum of ``Kᵀ diag(w) K``."""
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(3)
+    K = sp.random(40, 25, density=0.2, format="csr", random_state=rng)
+    K.data -= 0.5  # entries of both signs
+    w = rng.uniform(0.0, 2.0, size=40)
+    w[::7] = 0.0  # rows of zero weight, as the band rows have
+    rows = np.repeat(np.arange(40), np.diff(K.indptr))
+    expected = np.bincount(rows, weights=np.abs(K.data), minlength=40)
+    assert np.array_equal(kernels.abs_row_sums(K.indptr, K.data), expected)
+    gram = (K.T @ sp.diags(w) @ K).toarray()
+    bound = kernels.gram_row_bound(K.indptr, K.indices, K.data, w, 25)
+    # the bound sums the same products without their signs' cancellation: 1e-12 relative
+    # covers the two sums' different order where nothing cancels
+    assert np.abs(gram).sum(axis=1).max() <= bound * (1.0 + 1e-12)
+    assert np.linalg.eigvalsh(gram).max() <= bound
+    assert kernels.gram_row_bound(K.indptr, K.indices, K.data, np.zeros(40), 25) == 0.0
