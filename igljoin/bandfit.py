@@ -360,8 +360,10 @@ def band_fit(
     n0 = VN[curve]
     pulled = np.zeros((k, 3))
     # a fit of one chunk keeps its band rows for the fit itself (pass 2 would make them
-    # again); several chunks make each again, so that only one chunk's are held at a time
-    kept = None
+    # again); several chunks keep only which band vertices are on the sheet (packed bits,
+    # k × M / 8 bytes), and pass 2 places each chunk's band vertices again from ``hits``,
+    # so that only one chunk's rows and normals are held at a time
+    kept, sheets = None, []
     for sl in chunks:
         lists = found[sl] if whole else tree.query_ball_point(A[sl], band, return_sorted=False)
         size = int(offsets[sl.stop] - offsets[sl.start])
@@ -371,6 +373,9 @@ def band_fit(
         pulled[sl] = np.einsum("km,kmj->kj", np.where(valid, 1.0, 0.0), VNb)
         if len(chunks) == 1:
             kept = idx, valid
+        else:
+            sheets.append(np.packbits(valid, axis=1))
+        del idx, valid, VNb
     found = None  # the whole curve's lists, no longer needed
     n0 = unit(pulled + n0)
     del pulled
@@ -381,10 +386,13 @@ def band_fit(
     side = _orientation_side(F, curve, closed)
     along = min(band, along_curve_reach(P, closed, n0, band))
     parts, used, normal, inward, slope_error = [], [], [], [], []
-    for sl in chunks:
-        idx, valid = (
-            kept if kept is not None else _band_rows(hits, offsets, counts, curve, VN, sl, M)[:2]
-        )
+    for i, sl in enumerate(chunks):
+        if kept is not None:
+            idx, valid = kept
+        else:
+            idx = _padded_rows(hits, offsets, counts, curve, sl, M)[0]
+            valid = np.unpackbits(sheets[i], axis=1, count=M).view(bool)
+            sheets[i] = None
         D = V[idx] - A[sl, None, :]
         g = g0[sl]
         unknown = side[sl] == 0
@@ -460,14 +468,25 @@ def _band_rows(hits, offsets, counts, curve, VN, sl: slice, M: int):
     other than the curve vertex lies on the curve vertex's sheet of the
     surface; ``VNb`` (r, M, 3) their vertex normals ``VN`` (n, 3).
     """
-    idx = np.zeros((sl.stop - sl.start, M), dtype=np.int64)
-    valid = np.arange(M)[None, :] < counts[sl, None]
-    idx[valid] = hits[offsets[sl.start] : offsets[sl.stop]]
-    valid &= idx != curve[sl, None]
+    idx, valid = _padded_rows(hits, offsets, counts, curve, sl, M)
     VNb = VN[idx]
     # on the same sheet of the surface as the curve vertex
     valid &= np.einsum("kmj,kj->km", VNb, VN[curve[sl]]) > _SAME_SHEET_COS
     return idx, valid, VNb
+
+
+def _padded_rows(hits, offsets, counts, curve, sl: slice, M: int):
+    """Band vertices of the curve vertices ``sl``, padded to ``M``: ``idx`` and ``valid``.
+
+    ``idx`` (r, M) int64: each row's band vertices (``hits[offsets[i]:offsets[i + 1]]``)
+    then zeros; ``valid`` (r, M) bool: where a band vertex other than the curve vertex
+    is (:func:`_band_rows` adds the test of the surface's sheet).
+    """
+    idx = np.zeros((sl.stop - sl.start, M), dtype=np.int64)
+    valid = np.arange(M)[None, :] < counts[sl, None]
+    idx[valid] = hits[offsets[sl.start] : offsets[sl.stop]]
+    valid &= idx != curve[sl, None]
+    return idx, valid
 
 
 def _chunk_fit(V, idx, valid, D, curve, T, g0, n0, band: float, along: float):
@@ -506,12 +525,7 @@ def _chunk_fit(V, idx, valid, D, curve, T, g0, n0, band: float, along: float):
     X = _columns(u, v, used)
     Z = _fit_rows(X, w)
     beta = Z[:, 1, :] / band
-    rows = np.repeat(np.arange(r), M)
-    data = np.concatenate([beta.reshape(-1), -beta.sum(axis=1)])
-    cols = np.concatenate([idx.reshape(-1), curve])
-    rows = np.concatenate([rows, np.arange(r)])
-    keep = data != 0
-    W = sp.csr_matrix((data[keep], (rows[keep], cols[keep])), shape=(r, len(V)))
+    W = sp.csr_matrix(_weight_rows(beta, idx, curve, -beta.sum(axis=1)), shape=(r, len(V)))
     c = W @ V
     inward = unit(c - np.einsum("ij,ij->i", c, T)[:, None] * T)
     # where the band is empty keep the rough frame
@@ -539,7 +553,7 @@ def _slope_error(Z, X, D, normal, band: float, used: np.ndarray) -> np.ndarray:
     z = np.einsum("kmj,kj->km", D, normal)
     coef = np.einsum("kim,km->ki", Z, z)
     fitted = np.einsum("kmi,ki->km", X, coef)
-    present = np.abs(Z).sum(axis=1) > 0
+    present = _nonzero_columns(Z)
     r = np.where(present, z - fitted, 0.0)
     dof = used - _parameters(used)
     sigma2 = (r * r).sum(axis=1) / np.maximum(dof, 1)
@@ -681,3 +695,61 @@ def _scatter_columns(Zc: np.ndarray, where: np.ndarray, M: int) -> np.ndarray:
             for i in range(p):
                 Z[r, i, m] = Zc[r, i, c]
     return Z
+
+
+@nb.njit(cache=True)
+def _weight_rows(beta: np.ndarray, idx: np.ndarray, curve: np.ndarray, at_curve: np.ndarray):
+    """The fit's rows as CSR arrays ``(data, indices, indptr)``, each row's columns sorted.
+
+    Row ``i`` holds ``beta[i, m]`` (r, M) at column ``idx[i, m]`` (ascending along the
+    row wherever ``beta`` is not 0: the band vertices in their sorted order) and
+    ``at_curve[i]`` (r,) at ``curve[i]`` (r,), none of them 0 (a NaN is kept): the
+    canonical matrix scipy makes of the same entries as coordinates (sorted, and no
+    column twice, since a curve vertex has no weight in its own band), without its sort.
+    """
+    r, M = beta.shape
+    indptr = np.zeros(r + 1, dtype=np.int64)
+    for i in range(r):
+        c = 0 if at_curve[i] == 0.0 else 1
+        for m in range(M):
+            if beta[i, m] != 0.0:
+                c += 1
+        indptr[i + 1] = indptr[i] + c
+    indices = np.empty(indptr[r], dtype=np.int64)
+    data = np.empty(indptr[r])
+    for i in range(r):
+        p, q, placed = indptr[i], curve[i], at_curve[i] == 0.0
+        for m in range(M):
+            b = beta[i, m]
+            if b == 0.0:
+                continue
+            if not placed and q < idx[i, m]:
+                indices[p], data[p] = q, at_curve[i]
+                p += 1
+                placed = True
+            indices[p], data[p] = idx[i, m], b
+            p += 1
+        if not placed:
+            indices[p], data[p] = q, at_curve[i]
+    return data, indices, indptr
+
+
+@nb.njit(cache=True)
+def _nonzero_columns(Z: np.ndarray) -> np.ndarray:
+    """Where a column of ``Z`` (k, p, M) holds a non-zero and no NaN, shape (k, M).
+
+    ``np.abs(Z).sum(axis=1) > 0`` without its two (k, p, M) and (k, M) temporaries (a
+    sum of magnitudes is positive exactly where one is, in any order, and NaN where one
+    is NaN).
+    """
+    k, p, M = Z.shape
+    out = np.empty((k, M), dtype=np.bool_)
+    s = np.empty(M)
+    for r in range(k):
+        s[:] = 0.0
+        for i in range(p):
+            for m in range(M):
+                s[m] += abs(Z[r, i, m])
+        for m in range(M):
+            out[r, m] = s[m] > 0.0
+    return out
