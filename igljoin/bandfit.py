@@ -359,23 +359,18 @@ def band_fit(
     hits = np.empty(total, dtype=np.int32 if n < 2**31 else np.int64)
     n0 = VN[curve]
     pulled = np.zeros((k, 3))
-    # a fit of one chunk keeps its band rows for the fit itself (pass 2 would make them
-    # again); several chunks keep only which band vertices are on the sheet (packed bits,
-    # k × M / 8 bytes), and pass 2 places each chunk's band vertices again from ``hits``,
-    # so that only one chunk's rows and normals are held at a time
-    kept, sheets = None, []
+    # which band vertices are on the curve vertex's sheet, kept for pass 2 (packed bits,
+    # k × M / 8 bytes, when there are several chunks); pass 2 places each chunk's band
+    # vertices again from ``hits``, so that only one chunk's rows are held at a time
+    sheets = []
     for sl in chunks:
         lists = found[sl] if whole else tree.query_ball_point(A[sl], band, return_sorted=False)
         size = int(offsets[sl.stop] - offsets[sl.start])
         got = np.fromiter(chain.from_iterable(lists), dtype=np.int64, count=size)
         hits[offsets[sl.start] : offsets[sl.stop]] = near[_sorted_in_rows(got, counts[sl])]
-        idx, valid, VNb = _band_rows(hits, offsets, counts, curve, VN, sl, M)
-        pulled[sl] = np.einsum("km,kmj->kj", np.where(valid, 1.0, 0.0), VNb)
-        if len(chunks) == 1:
-            kept = idx, valid
-        else:
-            sheets.append(np.packbits(valid, axis=1))
-        del idx, valid, VNb
+        valid, pulled[sl] = _band_rows(hits, offsets, counts, curve, VN, sl.start, sl.stop, M)
+        sheets.append(valid if len(chunks) == 1 else np.packbits(valid, axis=1))
+        del valid
     found = None  # the whole curve's lists, no longer needed
     n0 = unit(pulled + n0)
     del pulled
@@ -387,20 +382,19 @@ def band_fit(
     along = min(band, along_curve_reach(P, closed, n0, band))
     parts, used, normal, inward, slope_error = [], [], [], [], []
     for i, sl in enumerate(chunks):
-        if kept is not None:
-            idx, valid = kept
-        else:
-            idx = _padded_rows(hits, offsets, counts, curve, sl, M)[0]
-            valid = np.unpackbits(sheets[i], axis=1, count=M).view(bool)
-            sheets[i] = None
-        D = V[idx] - A[sl, None, :]
+        idx = _padded_rows(hits, offsets, counts, sl, M)
+        valid = sheets[i] if len(chunks) == 1 else np.unpackbits(sheets[i], axis=1, count=M)
+        valid = valid.view(bool)
+        sheets[i] = None
         g = g0[sl]
         unknown = side[sl] == 0
         if unknown.any():
             w_area = np.where(valid, 1.0, 0.0)
+            D = V[idx] - A[sl, None, :]
             side[sl][unknown] = np.sign(np.einsum("km,kmj,kj->k", w_area, D, g))[unknown]
+            del D
         g[side[sl] < 0] *= -1.0
-        fit = _chunk_fit(V, idx, valid, D, curve[sl], T[sl], g, n0[sl], band, along)
+        fit = _chunk_fit(V, idx, valid, A[sl], curve[sl], T[sl], g, n0[sl], band, along)
         parts.append(fit[0])
         used.append(fit[1])
         inward.append(fit[2])
@@ -460,45 +454,60 @@ def _rows_per_chunk(M: int) -> int:
     return max(1, FIT_CHUNK_ENTRIES // M)
 
 
-def _band_rows(hits, offsets, counts, curve, VN, sl: slice, M: int):
-    """Band vertices of the curve vertices ``sl``, padded to ``M``: ``idx``, ``valid``, ``VNb``.
+@nb.njit(cache=True)
+def _band_rows(hits, offsets, counts, curve, VN, start: int, stop: int, M: int):
+    """Which band vertices of curve vertices ``start:stop`` are on their sheet; their normals' sum.
 
-    ``idx`` (r, M) int64 and ``valid`` (r, M) bool: each row's band vertices
-    (``hits[offsets[i]:offsets[i + 1]]``) then zeros, valid where a band vertex
-    other than the curve vertex lies on the curve vertex's sheet of the
-    surface; ``VNb`` (r, M, 3) their vertex normals ``VN`` (n, 3).
+    Returns ``valid`` (r, M) bool: row ``i``'s band vertices
+    (``hits[offsets[i]:offsets[i + 1]]``, then padding) that are not the curve vertex and
+    whose vertex normal (``VN``, (n, 3)) is on the curve vertex's sheet of the surface;
+    and ``pulled`` (r, 3): the sum of those normals. Compiled, without the (r, M, 3)
+    normals it gathered before: the floats of ``np.einsum("kmj,kj->km", VN[idx], n0)``
+    (numpy adds three products as the first and third, then the second) and of
+    ``np.einsum("km,kmj->kj", valid, VN[idx])`` (first to last).
     """
-    idx, valid = _padded_rows(hits, offsets, counts, curve, sl, M)
-    VNb = VN[idx]
-    # on the same sheet of the surface as the curve vertex
-    valid &= np.einsum("kmj,kj->km", VNb, VN[curve[sl]]) > _SAME_SHEET_COS
-    return idx, valid, VNb
+    r = stop - start
+    valid = np.zeros((r, M), dtype=np.bool_)
+    pulled = np.zeros((r, 3))
+    for i in range(r):
+        q = curve[start + i]
+        a0, a1, a2 = VN[q, 0], VN[q, 1], VN[q, 2]
+        s0 = s1 = s2 = 0.0
+        o = offsets[start + i]
+        for m in range(counts[start + i]):
+            h = hits[o + m]
+            if h == q:
+                continue
+            b0, b1, b2 = VN[h, 0], VN[h, 1], VN[h, 2]
+            if 0.0 + ((b0 * a0 + b2 * a2) + b1 * a1) > _SAME_SHEET_COS:
+                valid[i, m] = True
+                s0 += b0
+                s1 += b1
+                s2 += b2
+        pulled[i, 0], pulled[i, 1], pulled[i, 2] = s0, s1, s2
+    return valid, pulled
 
 
-def _padded_rows(hits, offsets, counts, curve, sl: slice, M: int):
-    """Band vertices of the curve vertices ``sl``, padded to ``M``: ``idx`` and ``valid``.
-
-    ``idx`` (r, M) int64: each row's band vertices (``hits[offsets[i]:offsets[i + 1]]``)
-    then zeros; ``valid`` (r, M) bool: where a band vertex other than the curve vertex
-    is (:func:`_band_rows` adds the test of the surface's sheet).
-    """
+def _padded_rows(hits, offsets, counts, sl: slice, M: int) -> np.ndarray:
+    """Band vertices of the curve vertices ``sl``, shape (r, M) int64: each row's band
+    vertices (``hits[offsets[i]:offsets[i + 1]]``), then zeros."""
     idx = np.zeros((sl.stop - sl.start, M), dtype=np.int64)
-    valid = np.arange(M)[None, :] < counts[sl, None]
-    idx[valid] = hits[offsets[sl.start] : offsets[sl.stop]]
-    valid &= idx != curve[sl, None]
-    return idx, valid
+    idx[np.arange(M)[None, :] < counts[sl, None]] = hits[offsets[sl.start] : offsets[sl.stop]]
+    return idx
 
 
-def _chunk_fit(V, idx, valid, D, curve, T, g0, n0, band: float, along: float):
+def _chunk_fit(V, idx, valid, A, curve, T, g0, n0, band: float, along: float):
     """The fit at ``r`` curve vertices from their padded band vertices.
 
     Parameters
     ----------
     V : ndarray, shape (n, 3)
-    idx, valid : ndarray, shape (r, M)
+    idx : ndarray of int64, shape (r, M)
+        From :func:`_padded_rows`.
+    valid : ndarray of bool, shape (r, M)
         From :func:`_band_rows`.
-    D : ndarray, shape (r, M, 3)
-        Band vertices less their curve vertex.
+    A : ndarray, shape (r, 3)
+        The curve vertices' positions.
     curve : ndarray of int64, shape (r,)
     T, g0, n0 : ndarray, shape (r, 3)
         Tangent, rough direction into the surface and band normal.
@@ -513,14 +522,9 @@ def _chunk_fit(V, idx, valid, D, curve, T, g0, n0, band: float, along: float):
     slope_error : ndarray, shape (r,)
     """
     r, M = idx.shape
-    u = np.einsum("kmj,kj->km", D, T) / band
-    v = np.einsum("kmj,kj->km", D, g0) / band
     # an ellipsoid: ``along`` wide in the curve's direction, ``band`` across it and
     # off the surface, so the bend of a tube around its end stays out of the fit
-    ua = u * (band / along)
-    r2 = ua * ua + v * v + (np.einsum("kmj,kj->km", D, n0) / band) ** 2
-    valid = valid & (r2 <= 1.0)
-    w = np.where(valid, (1.0 - r2) ** 2 + 1e-3, 0.0)
+    u, v, w, valid = _ellipsoid(V, idx, valid, A, T, g0, n0, band, band / along)
     used = valid.sum(axis=1)
     X = _columns(u, v, used)
     Z = _fit_rows(X, w)
@@ -533,7 +537,8 @@ def _chunk_fit(V, idx, valid, D, curve, T, g0, n0, band: float, along: float):
     inward[empty] = g0[empty]
     normal = unit(np.cross(inward, T))
     normal[np.einsum("ij,ij->i", normal, n0) < 0] *= -1.0
-    return W, used, inward, normal, _slope_error(Z, X, D, normal, band, used)
+    z = _heights(V, idx, A, normal)
+    return W, used, inward, normal, _slope_error(Z, X, z, band, used)
 
 
 def _rows_of(chunks: list, empty_shape: tuple, dtype=np.float64) -> np.ndarray:
@@ -541,7 +546,7 @@ def _rows_of(chunks: list, empty_shape: tuple, dtype=np.float64) -> np.ndarray:
     return np.concatenate(chunks) if chunks else np.zeros(empty_shape, dtype=dtype)
 
 
-def _slope_error(Z, X, D, normal, band: float, used: np.ndarray) -> np.ndarray:
+def _slope_error(Z, X, z, band: float, used: np.ndarray) -> np.ndarray:
     """Standard error of the fitted slope off the curve, from the fit's own residuals.
 
     The heights ``z_j`` of the band vertices over the fitted tangent plane are
@@ -549,8 +554,8 @@ def _slope_error(Z, X, D, normal, band: float, used: np.ndarray) -> np.ndarray:
     degree of freedom) and the fit's row ``Z_v`` give ``se = σ ‖Z_v‖ / band``
     (unit-free: radians for small angles). Noise of a scan, or a surface the
     quadratic does not follow, raises it; a clean smooth surface has ``se ≈ 0``.
+    ``z`` (k, M) from :func:`_heights`.
     """
-    z = np.einsum("kmj,kj->km", D, normal)
     coef = np.einsum("kim,km->ki", Z, z)
     fitted = np.einsum("kmi,ki->km", X, coef)
     present = _nonzero_columns(Z)
@@ -753,3 +758,53 @@ def _nonzero_columns(Z: np.ndarray) -> np.ndarray:
         for m in range(M):
             out[r, m] = s[m] > 0.0
     return out
+
+
+@nb.njit(cache=True)
+def _ellipsoid(V, idx, valid, A, T, g0, n0, band: float, stretch: float):
+    """Local coordinates and weights of the band vertices ``idx`` (r, M) of curve points ``A``.
+
+    With ``D = V[idx] - A[:, None]``: ``u = D·T / band`` and ``v = D·g0 / band`` (r, M),
+    the squared radius ``r2 = (u stretch)² + v² + (D·n0 / band)²`` of the ellipsoid,
+    ``valid`` (r, M) narrowed to ``r2 <= 1`` and the weights ``(1 - r2)² + 1e-3`` there
+    (0 elsewhere). Compiled, without the (r, M, 3) differences: the floats of the array
+    expressions, each dot product as ``np.einsum("kmj,kj->km")`` adds its three products
+    (the first and third, then the second).
+    """
+    r, M = idx.shape
+    u = np.empty((r, M))
+    v = np.empty((r, M))
+    w = np.empty((r, M))
+    inside = np.empty((r, M), dtype=np.bool_)
+    for i in range(r):
+        t0, t1, t2 = T[i, 0], T[i, 1], T[i, 2]
+        g_0, g_1, g_2 = g0[i, 0], g0[i, 1], g0[i, 2]
+        n_0, n_1, n_2 = n0[i, 0], n0[i, 1], n0[i, 2]
+        for m in range(M):
+            h = idx[i, m]
+            d0, d1, d2 = V[h, 0] - A[i, 0], V[h, 1] - A[i, 1], V[h, 2] - A[i, 2]
+            a = (0.0 + ((d0 * t0 + d2 * t2) + d1 * t1)) / band
+            b = (0.0 + ((d0 * g_0 + d2 * g_2) + d1 * g_1)) / band
+            c = (0.0 + ((d0 * n_0 + d2 * n_2) + d1 * n_1)) / band
+            a_s = a * stretch
+            r2 = (a_s * a_s + b * b) + c * c
+            ok = valid[i, m] and r2 <= 1.0
+            u[i, m], v[i, m], inside[i, m] = a, b, ok
+            w[i, m] = (1.0 - r2) * (1.0 - r2) + 1e-3 if ok else 0.0
+    return u, v, w, inside
+
+
+@nb.njit(cache=True)
+def _heights(V, idx, A, normal):
+    """Heights ``(V[idx] - A[:, None])·normal`` (r, M) of the band vertices ``idx`` (r, M)
+    over the tangent planes at ``A`` (r, 3) of normal ``normal`` (r, 3): the floats of
+    ``np.einsum("kmj,kj->km")`` (see :func:`_ellipsoid`), without the differences."""
+    r, M = idx.shape
+    z = np.empty((r, M))
+    for i in range(r):
+        n_0, n_1, n_2 = normal[i, 0], normal[i, 1], normal[i, 2]
+        for m in range(M):
+            h = idx[i, m]
+            d0, d1, d2 = V[h, 0] - A[i, 0], V[h, 1] - A[i, 1], V[h, 2] - A[i, 2]
+            z[i, m] = 0.0 + ((d0 * n_0 + d2 * n_2) + d1 * n_1)
+    return z

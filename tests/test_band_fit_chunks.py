@@ -22,7 +22,8 @@ def _whole_curve_fit(V, F, curve, closed, band, *, curve_points=None):
     """The band fit as one pass over the whole curve: (k, M) work arrays, no chunks.
 
     The code the chunked fit replaced (less its size guard), kept as the reference
-    its floats are compared with.
+    its floats are compared with: numpy's array expressions where the fit now has
+    compiled loops (the sheet test, the ellipsoid, the heights, the rows' placing).
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
@@ -89,8 +90,22 @@ def _whole_curve_fit(V, F, curve, closed, band, *, curve_points=None):
         frames=SeamFrames(normal=normal, tangent=T, inward=inward),
         band=band,
         counts=used,
-        slope_error=bandfit._slope_error(Z, X, D, normal, band, used),
+        slope_error=_slope_error(Z, X, D, normal, band, used),
     )
+
+
+def _slope_error(Z, X, D, normal, band, used):
+    """The slope error as array expressions over the (k, M, 3) differences ``D`` (the code
+    the compiled heights and the weighted columns' mark replaced)."""
+    z = np.einsum("kmj,kj->km", D, normal)
+    coef = np.einsum("kim,km->ki", Z, z)
+    fitted = np.einsum("kmi,ki->km", X, coef)
+    present = np.abs(Z).sum(axis=1) > 0
+    r = np.where(present, z - fitted, 0.0)
+    dof = used - bandfit._parameters(used)
+    sigma2 = (r * r).sum(axis=1) / np.maximum(dof, 1)
+    se = np.sqrt(sigma2 * (Z[:, 1, :] ** 2).sum(axis=1)) / band
+    return np.where(dof > 0, se, 0.0)
 
 
 def _padded_fit_rows(X, w):
