@@ -321,9 +321,12 @@ def band_fit(
         When the fit's rows would hold more than :data:`MAX_FIT_ENTRIES`
         entries, with a ``smooth_band`` that fits.
     """
-    V = np.asarray(V, dtype=np.float64)
+    # the compiled loops read V read-only and a curve of their own whatever the caller's
+    # flags, so that a process loads one compiled version of each (a few ms apiece)
+    V = np.ascontiguousarray(V, dtype=np.float64).view()
+    V.flags.writeable = False
     F = np.asarray(F, dtype=np.int64)
-    curve = np.asarray(curve, dtype=np.int64)
+    curve = np.array(curve, dtype=np.int64)
     band = float(band)
     n, k = len(V), len(curve)
     A = V[curve]
@@ -524,9 +527,7 @@ def _chunk_fit(V, idx, valid, A, curve, T, g0, n0, band: float, along: float):
     r, M = idx.shape
     # an ellipsoid: ``along`` wide in the curve's direction, ``band`` across it and
     # off the surface, so the bend of a tube around its end stays out of the fit
-    u, v, w, valid = _ellipsoid(V, idx, valid, A, T, g0, n0, band, band / along)
-    used = valid.sum(axis=1)
-    X = _columns(u, v, used)
+    X, w, valid, used = _ellipsoid(V, idx, valid, A, T, g0, n0, band, band / along)
     Z = _fit_rows(X, w)
     beta = Z[:, 1, :] / band
     W = sp.csr_matrix(_weight_rows(beta, idx, curve, -beta.sum(axis=1)), shape=(r, len(V)))
@@ -537,8 +538,8 @@ def _chunk_fit(V, idx, valid, A, curve, T, g0, n0, band: float, along: float):
     inward[empty] = g0[empty]
     normal = unit(np.cross(inward, T))
     normal[np.einsum("ij,ij->i", normal, n0) < 0] *= -1.0
-    z = _heights(V, idx, A, normal)
-    return W, used, inward, normal, _slope_error(Z, X, z, band, used)
+    z, present = _slope_inputs(V, idx, A, normal, Z)
+    return W, used, inward, normal, _slope_error(Z, X, z, present, band, used)
 
 
 def _rows_of(chunks: list, empty_shape: tuple, dtype=np.float64) -> np.ndarray:
@@ -546,7 +547,7 @@ def _rows_of(chunks: list, empty_shape: tuple, dtype=np.float64) -> np.ndarray:
     return np.concatenate(chunks) if chunks else np.zeros(empty_shape, dtype=dtype)
 
 
-def _slope_error(Z, X, z, band: float, used: np.ndarray) -> np.ndarray:
+def _slope_error(Z, X, z, present, band: float, used: np.ndarray) -> np.ndarray:
     """Standard error of the fitted slope off the curve, from the fit's own residuals.
 
     The heights ``z_j`` of the band vertices over the fitted tangent plane are
@@ -554,11 +555,10 @@ def _slope_error(Z, X, z, band: float, used: np.ndarray) -> np.ndarray:
     degree of freedom) and the fit's row ``Z_v`` give ``se = σ ‖Z_v‖ / band``
     (unit-free: radians for small angles). Noise of a scan, or a surface the
     quadratic does not follow, raises it; a clean smooth surface has ``se ≈ 0``.
-    ``z`` (k, M) from :func:`_heights`.
+    ``z`` (k, M) and ``present`` (k, M) from :func:`_slope_inputs`.
     """
     coef = np.einsum("kim,km->ki", Z, z)
     fitted = np.einsum("kmi,ki->km", X, coef)
-    present = _nonzero_columns(Z)
     r = np.where(present, z - fitted, 0.0)
     dof = used - _parameters(used)
     sigma2 = (r * r).sum(axis=1) / np.maximum(dof, 1)
@@ -762,20 +762,23 @@ def _nonzero_columns(Z: np.ndarray) -> np.ndarray:
 
 @nb.njit(cache=True)
 def _ellipsoid(V, idx, valid, A, T, g0, n0, band: float, stretch: float):
-    """Local coordinates and weights of the band vertices ``idx`` (r, M) of curve points ``A``.
+    """Design columns and weights of the band vertices ``idx`` (r, M) of curve points ``A``.
 
     With ``D = V[idx] - A[:, None]``: ``u = D·T / band`` and ``v = D·g0 / band`` (r, M),
     the squared radius ``r2 = (u stretch)² + v² + (D·n0 / band)²`` of the ellipsoid,
-    ``valid`` (r, M) narrowed to ``r2 <= 1`` and the weights ``(1 - r2)² + 1e-3`` there
-    (0 elsewhere). Compiled, without the (r, M, 3) differences: the floats of the array
-    expressions, each dot product as ``np.einsum("kmj,kj->km")`` adds its three products
-    (the first and third, then the second).
+    ``valid`` (r, M) narrowed to ``r2 <= 1`` (``inside``), the weights
+    ``(1 - r2)² + 1e-3`` there (0 elsewhere), the vertices ``used`` (r,) inside, and
+    the columns ``X = _columns(u, v, used)`` (r, M, 8). Returns ``X, w, inside, used``.
+    Compiled, without the (r, M, 3) differences: the floats of the array expressions,
+    each dot product as ``np.einsum("kmj,kj->km")`` adds its three products (the first
+    and third, then the second).
     """
     r, M = idx.shape
     u = np.empty((r, M))
     v = np.empty((r, M))
     w = np.empty((r, M))
     inside = np.empty((r, M), dtype=np.bool_)
+    used = np.zeros(r, dtype=np.int64)
     for i in range(r):
         t0, t1, t2 = T[i, 0], T[i, 1], T[i, 2]
         g_0, g_1, g_2 = g0[i, 0], g0[i, 1], g0[i, 2]
@@ -791,7 +794,15 @@ def _ellipsoid(V, idx, valid, A, T, g0, n0, band: float, stretch: float):
             ok = valid[i, m] and r2 <= 1.0
             u[i, m], v[i, m], inside[i, m] = a, b, ok
             w[i, m] = (1.0 - r2) * (1.0 - r2) + 1e-3 if ok else 0.0
-    return u, v, w, inside
+            used[i] += ok
+    return _columns(u, v, used), w, inside, used
+
+
+@nb.njit(cache=True)
+def _slope_inputs(V, idx, A, normal, Z):
+    """:func:`_heights` and :func:`_nonzero_columns` in one compiled call (a process loads
+    each compiled function it calls from Python once, a few milliseconds apiece)."""
+    return _heights(V, idx, A, normal), _nonzero_columns(Z)
 
 
 @nb.njit(cache=True)

@@ -366,33 +366,37 @@ def test_the_marked_columns_are_those_of_a_positive_sum_of_magnitudes():
 
 
 def test_the_compiled_local_coordinates_are_the_einsums():
-    # rows of band vertices (with padding at vertex 0), frames and a stretch along the
-    # curve as the fit has them; every array equal to the bit to the expressions the
-    # compiled loops replaced, the sign of a zero included
+    # rows of band vertices (with padding at vertex 0) spread from well inside the band
+    # to mostly outside it, so that rows fit a plane, a quadratic and the full columns;
+    # frames and a stretch along the curve as the fit has them. Every array equal to the
+    # bit to the expressions the compiled loops replaced, the sign of a zero included
     rng = np.random.default_rng(5)
-    r, M, n = 30, 50, 400
-    V = rng.normal(size=(n, 3))
-    V[3] = V[4]  # a band vertex at its curve vertex: differences of 0
-    idx = rng.integers(0, n, (r, M))
-    idx[:, 40:] = 0
-    idx[0, :2] = 3, 4
-    A = V[rng.integers(0, n, r)]
-    A[0] = V[3]
+    r, M, band, along = 30, 50, 1.0, 0.7
+    A = rng.normal(size=(r, 3))
+    spread = np.linspace(0.2, 3.0, r)
+    V = np.concatenate([(A[:, None, :] + spread[:, None, None] * rng.normal(size=(r, 40, 3)))
+                        .reshape(-1, 3), A[:1]])  # fmt: skip
+    idx = np.zeros((r, M), dtype=np.int64)
+    idx[:, :40] = np.arange(r * 40).reshape(r, 40)
+    idx[0, 0] = len(V) - 1  # a band vertex at its curve point: differences of 0
     T, g0, n0, normal = (unit(rng.normal(size=(r, 3))) for _ in range(4))
     # products 0 × negative are -0.0, their sum too; numpy's einsum adds it to a 0.0
     T[0], normal[0] = -np.abs(T[0]), -np.abs(normal[0])
-    valid = rng.random((r, M)) < 0.7
-    band, along = 1.3, 0.9
-    u, v, w, inside = bandfit._ellipsoid(V, idx, valid, A, T, g0, n0, band, band / along)
+    valid = (rng.random((r, M)) < 0.9) & (np.arange(M) < 40)
+    X, w, inside, used = bandfit._ellipsoid(V, idx, valid, A, T, g0, n0, band, band / along)
     D = V[idx] - A[:, None, :]
-    u0 = np.einsum("kmj,kj->km", D, T) / band
-    v0 = np.einsum("kmj,kj->km", D, g0) / band
-    ua = u0 * (band / along)
-    r2 = ua * ua + v0 * v0 + (np.einsum("kmj,kj->km", D, n0) / band) ** 2
+    u = np.einsum("kmj,kj->km", D, T) / band
+    v = np.einsum("kmj,kj->km", D, g0) / band
+    ua = u * (band / along)
+    r2 = ua * ua + v * v + (np.einsum("kmj,kj->km", D, n0) / band) ** 2
     inside0 = valid & (r2 <= 1.0)
-    assert inside0.any() and not inside0.all()
-    _assert_same(u, u0)
-    _assert_same(v, v0)
+    assert set(bandfit._parameters(inside0.sum(axis=1)).tolist()) == {2, 5, 8}
     _assert_same(inside, inside0)
+    _assert_same(used, inside0.sum(axis=1))
+    _assert_same(X, bandfit._columns(u, v, inside0.sum(axis=1)))
     _assert_same(w, np.where(inside0, (1.0 - r2) ** 2 + 1e-3, 0.0))
-    _assert_same(bandfit._heights(V, idx, A, normal), np.einsum("kmj,kj->km", D, normal))
+    Z = rng.normal(size=(r, 8, M))
+    Z[:, :, ::4] = 0.0
+    z, present = bandfit._slope_inputs(V, idx, A, normal, Z)
+    _assert_same(z, np.einsum("kmj,kj->km", D, normal))
+    _assert_same(present, np.abs(Z).sum(axis=1) > 0)
