@@ -176,10 +176,11 @@ def test_the_chunked_fit_is_the_whole_curve_fit_to_the_bit(fit_cases, rows, monk
 
 
 def test_a_curve_counted_before_its_query_is_fitted_to_the_bit(fit_cases, monkeypatch):
-    # a curve whose rows could exceed a chunk is counted first and queried a chunk at a
-    # time (a short one is queried once): a budget of 0 entries sends every curve that
-    # way, one row per chunk
+    # a curve whose lists could exceed WHOLE_QUERY_ENTRIES is counted first and queried
+    # a chunk at a time (a short one is queried once): budgets of 0 entries send every
+    # curve that way, one row per chunk
     monkeypatch.setattr(bandfit, "FIT_CHUNK_ENTRIES", 0)
+    monkeypatch.setattr(bandfit, "WHOLE_QUERY_ENTRIES", 0)
     for _, V, F, curve, closed, band, points in fit_cases:
         a = bandfit.band_fit(V, F, curve, closed, band, curve_points=points)
         b = _whole_curve_fit(V, F, curve, closed, band, curve_points=points)
