@@ -52,24 +52,30 @@ BAND_EDGES = 3.0
 #: made (its work arrays are chunked, :data:`FIT_CHUNK_ENTRIES`, so only its rows grow
 #: with the band). A join spends about :data:`_BYTES_PER_ENTRY` bytes per entry on
 #: them (the fit, the smooth-join term's copies, the augmented system's matrix and
-#: factor), so 1e8 entries are about 15 GB on top of the join without them. A
-#: 1M-vertex tube under the paper's host has 5.5e7. Change with
-#: ``igljoin.bandfit.MAX_FIT_ENTRIES``.
+#: factor, the coarse model's share), so 1e8 entries are about 13 GB on top of the join
+#: without them (a tube's seam about half of that). A 1M-vertex tube under the paper's
+#: host has 5.5e7. Change with ``igljoin.bandfit.MAX_FIT_ENTRIES``.
 MAX_FIT_ENTRIES = 100_000_000
 
-#: Bytes a join spends per entry of its band fit (see :data:`MAX_FIT_ENTRIES`): measured
-#: on the 1M-vertex tube, a peak of 10.5 GB with 5.5e7 entries against 2.8 GB for the
-#: same join with the one-ring smooth rows (no band), about 140 bytes an entry; 150 leaves
-#: a margin for a mesh less regular than the tube.
-_BYTES_PER_ENTRY = 150
+#: Bytes a join spends per entry of its band fit (see :data:`MAX_FIT_ENTRIES`): the peak
+#: RSS of a set-up and three iterations with the band rows less that of the same join
+#: with the one-ring smooth rows (``smooth_mode="robust"``), over the entries the guard
+#: counts, measured on the paper's patch and tube at 100k and 300k guest vertices:
+#: 113-145 bytes on the patches, where nearly every counted vertex enters the fit,
+#: 52-72 on the tubes, where about half of them lie outside the fit's ellipsoid (round
+#: the tube) and its rows hold half as many (per entry of the rows themselves about
+#: 110-150 on both). 130 is the patches' figure; 150 had come from the 1M tube before the
+#: join's memory was cut (10.5 GB then, 7.75 GB now).
+_BYTES_PER_ENTRY = 130
 
 #: Work-array entries (curve vertices × band vertices, padded) of one chunk of a band
 #: fit; about 210 bytes each (peak RSS of one fit of the 300k tube's seam at 2¹⁹ and 2²¹
-#: entries a chunk), so about 28 MB at a time. Smaller chunks stay in the caches and
-#: reuse their memory: the 300k tube's set-up spent 2.0-2.4 s in its terms in chunks of
-#: 2¹⁷ entries against 2.6 s in chunks of 2¹⁹, and 2.5-2.7 against 3.4-3.6 s as a
-#: process's first (2¹⁶ about as 2¹⁷, 2¹⁵ slower); every chunking gives the same floats.
-FIT_CHUNK_ENTRIES = 1 << 17
+#: entries a chunk), so about 55 MB at a time. Smaller chunks stay in the caches and
+#: reuse their memory: the 300k tube's terms took 2.1-2.3 s in chunks of 2¹⁸ entries
+#: against 2.6 s in chunks of 2¹⁹, and 2.6-2.8 against 3.4-3.6 s as a process's first;
+#: 2¹⁷ was about as fast but left the 100k tube's join 17 MB more at its peak (the
+#: allocator keeps smaller blocks), 2¹⁵ slower. Every chunking gives the same floats.
+FIT_CHUNK_ENTRIES = 1 << 18
 
 #: A curve whose vertices could not hold more than this many band vertices however wide
 #: the band (each has at most every vertex near the curve) is queried once; a longer one
@@ -475,7 +481,8 @@ def _band_rows(hits, offsets, counts, curve, VN, start: int, stop: int, M: int):
     whose vertex normal (``VN``, (n, 3)) is on the curve vertex's sheet of the surface;
     and ``pulled`` (r, 3): the sum of those normals. Compiled, without the (r, M, 3)
     normals it gathered before: the floats of ``np.einsum("kmj,kj->km", VN[idx], n0)``
-    (numpy adds three products as the first and third, then the second) and of
+    (whose two-lane vector loop adds three products as the first and third, then the
+    second; tests/test_band_fit_chunks.py compares the two) and of
     ``np.einsum("km,kmj->kj", valid, VN[idx])`` (first to last).
     """
     r = stop - start
