@@ -52,20 +52,36 @@ BAND_EDGES = 3.0
 #: made (its work arrays are chunked, :data:`FIT_CHUNK_ENTRIES`, so only its rows grow
 #: with the band). A join spends about :data:`_BYTES_PER_ENTRY` bytes per entry on
 #: them (the fit, the smooth-join term's copies, the augmented system's matrix and
-#: factor), so 1e8 entries are about 15 GB on top of the join without them. A
-#: 1M-vertex tube under the paper's host has 5.5e7. Change with
-#: ``igljoin.bandfit.MAX_FIT_ENTRIES``.
+#: factor, the coarse model's share), so 1e8 entries are about 13 GB on top of the join
+#: without them (a tube's seam about half of that). A 1M-vertex tube under the paper's
+#: host has 5.5e7. Change with ``igljoin.bandfit.MAX_FIT_ENTRIES``.
 MAX_FIT_ENTRIES = 100_000_000
 
-#: Bytes a join spends per entry of its band fit (see :data:`MAX_FIT_ENTRIES`): measured
-#: on the 1M-vertex tube, a peak of 10.5 GB with 5.5e7 entries against 2.8 GB for the
-#: same join with the one-ring smooth rows (no band), about 140 bytes an entry; 150 leaves
-#: a margin for a mesh less regular than the tube.
-_BYTES_PER_ENTRY = 150
+#: Bytes a join spends per entry of its band fit (see :data:`MAX_FIT_ENTRIES`): the peak
+#: RSS of a set-up and three iterations with the band rows less that of the same join
+#: with the one-ring smooth rows (``smooth_mode="robust"``), over the entries the guard
+#: counts, measured on the paper's patch and tube at 100k and 300k guest vertices:
+#: 113-145 bytes on the patches, where nearly every counted vertex enters the fit,
+#: 52-72 on the tubes, where about half of them lie outside the fit's ellipsoid (round
+#: the tube) and its rows hold half as many (per entry of the rows themselves about
+#: 110-150 on both). 130 is the patches' figure; 150 had come from the 1M tube before the
+#: join's memory was cut (10.5 GB then, 7.75 GB now).
+_BYTES_PER_ENTRY = 130
 
 #: Work-array entries (curve vertices × band vertices, padded) of one chunk of a band
-#: fit; about 260 bytes each (measured on the 300k tube), so about 140 MB at a time.
-FIT_CHUNK_ENTRIES = 1 << 19
+#: fit; about 210 bytes each (peak RSS of one fit of the 300k tube's seam at 2¹⁹ and 2²¹
+#: entries a chunk), so about 55 MB at a time. Smaller chunks stay in the caches and
+#: reuse their memory: the 300k tube's terms took 2.1-2.3 s in chunks of 2¹⁸ entries
+#: against 2.6 s in chunks of 2¹⁹, and 2.6-2.8 against 3.4-3.6 s as a process's first;
+#: 2¹⁷ was about as fast but left the 100k tube's join 17 MB more at its peak (the
+#: allocator keeps smaller blocks), 2¹⁵ slower. Every chunking gives the same floats.
+FIT_CHUNK_ENTRIES = 1 << 18
+
+#: A curve whose vertices could not hold more than this many band vertices however wide
+#: the band (each has at most every vertex near the curve) is queried once; a longer one
+#: is counted first and queried a chunk at a time (the whole curve's lists of band
+#: vertices, Python integers, are held only up to this size).
+WHOLE_QUERY_ENTRIES = 1 << 19
 
 #: A band vertex whose normal turns more than about 70° from the curve vertex's
 #: normal is on another sheet of the surface (the far side of a thin wall or wing).
@@ -321,9 +337,12 @@ def band_fit(
         When the fit's rows would hold more than :data:`MAX_FIT_ENTRIES`
         entries, with a ``smooth_band`` that fits.
     """
-    V = np.asarray(V, dtype=np.float64)
+    # the compiled loops read V read-only and a curve of their own whatever the caller's
+    # flags, so that a process loads one compiled version of each (a few ms apiece)
+    V = np.ascontiguousarray(V, dtype=np.float64).view()
+    V.flags.writeable = False
     F = np.asarray(F, dtype=np.int64)
-    curve = np.asarray(curve, dtype=np.int64)
+    curve = np.array(curve, dtype=np.int64)
     band = float(band)
     n, k = len(V), len(curve)
     A = V[curve]
@@ -339,10 +358,9 @@ def band_fit(
     from scipy.spatial import cKDTree  # here: scipy.spatial costs start-up time
 
     tree = cKDTree(V[near])
-    # a curve whose vertices could not hold more than a chunk's entries however wide
-    # the band (each has at most every near vertex) is queried once, its lists counted;
-    # a longer one is counted first and queried a chunk at a time
-    whole = k * len(near) <= FIT_CHUNK_ENTRIES
+    # a short curve is queried once, its lists counted; a longer one is counted first and
+    # queried a chunk at a time (WHOLE_QUERY_ENTRIES)
+    whole = k * len(near) <= WHOLE_QUERY_ENTRIES
     if whole:
         found = tree.query_ball_point(A, band, return_sorted=False)
         counts = np.fromiter(map(len, found), dtype=np.int64, count=k)
@@ -359,18 +377,18 @@ def band_fit(
     hits = np.empty(total, dtype=np.int32 if n < 2**31 else np.int64)
     n0 = VN[curve]
     pulled = np.zeros((k, 3))
-    # a fit of one chunk keeps its band rows for the fit itself (pass 2 would make them
-    # again); several chunks make each again, so that only one chunk's are held at a time
-    kept = None
+    # which band vertices are on the curve vertex's sheet, kept for pass 2 (packed bits,
+    # k × M / 8 bytes, when there are several chunks); pass 2 places each chunk's band
+    # vertices again from ``hits``, so that only one chunk's rows are held at a time
+    sheets = []
     for sl in chunks:
         lists = found[sl] if whole else tree.query_ball_point(A[sl], band, return_sorted=False)
         size = int(offsets[sl.stop] - offsets[sl.start])
         got = np.fromiter(chain.from_iterable(lists), dtype=np.int64, count=size)
         hits[offsets[sl.start] : offsets[sl.stop]] = near[_sorted_in_rows(got, counts[sl])]
-        idx, valid, VNb = _band_rows(hits, offsets, counts, curve, VN, sl, M)
-        pulled[sl] = np.einsum("km,kmj->kj", np.where(valid, 1.0, 0.0), VNb)
-        if len(chunks) == 1:
-            kept = idx, valid
+        valid, pulled[sl] = _band_rows(hits, offsets, counts, curve, VN, sl.start, sl.stop, M)
+        sheets.append(valid if len(chunks) == 1 else np.packbits(valid, axis=1))
+        del valid
     found = None  # the whole curve's lists, no longer needed
     n0 = unit(pulled + n0)
     del pulled
@@ -381,18 +399,20 @@ def band_fit(
     side = _orientation_side(F, curve, closed)
     along = min(band, along_curve_reach(P, closed, n0, band))
     parts, used, normal, inward, slope_error = [], [], [], [], []
-    for sl in chunks:
-        idx, valid = (
-            kept if kept is not None else _band_rows(hits, offsets, counts, curve, VN, sl, M)[:2]
-        )
-        D = V[idx] - A[sl, None, :]
+    for i, sl in enumerate(chunks):
+        idx = _padded_rows(hits, offsets, counts, sl, M)
+        valid = sheets[i] if len(chunks) == 1 else np.unpackbits(sheets[i], axis=1, count=M)
+        valid = valid.view(bool)
+        sheets[i] = None
         g = g0[sl]
         unknown = side[sl] == 0
         if unknown.any():
             w_area = np.where(valid, 1.0, 0.0)
+            D = V[idx] - A[sl, None, :]
             side[sl][unknown] = np.sign(np.einsum("km,kmj,kj->k", w_area, D, g))[unknown]
+            del D
         g[side[sl] < 0] *= -1.0
-        fit = _chunk_fit(V, idx, valid, D, curve[sl], T[sl], g, n0[sl], band, along)
+        fit = _chunk_fit(V, idx, valid, A[sl], curve[sl], T[sl], g, n0[sl], band, along)
         parts.append(fit[0])
         used.append(fit[1])
         inward.append(fit[2])
@@ -452,34 +472,61 @@ def _rows_per_chunk(M: int) -> int:
     return max(1, FIT_CHUNK_ENTRIES // M)
 
 
-def _band_rows(hits, offsets, counts, curve, VN, sl: slice, M: int):
-    """Band vertices of the curve vertices ``sl``, padded to ``M``: ``idx``, ``valid``, ``VNb``.
+@nb.njit(cache=True)
+def _band_rows(hits, offsets, counts, curve, VN, start: int, stop: int, M: int):
+    """Which band vertices of curve vertices ``start:stop`` are on their sheet; their normals' sum.
 
-    ``idx`` (r, M) int64 and ``valid`` (r, M) bool: each row's band vertices
-    (``hits[offsets[i]:offsets[i + 1]]``) then zeros, valid where a band vertex
-    other than the curve vertex lies on the curve vertex's sheet of the
-    surface; ``VNb`` (r, M, 3) their vertex normals ``VN`` (n, 3).
+    Returns ``valid`` (r, M) bool: row ``i``'s band vertices
+    (``hits[offsets[i]:offsets[i + 1]]``, then padding) that are not the curve vertex and
+    whose vertex normal (``VN``, (n, 3)) is on the curve vertex's sheet of the surface;
+    and ``pulled`` (r, 3): the sum of those normals. Compiled, without the (r, M, 3)
+    normals it gathered before: the floats of ``np.einsum("kmj,kj->km", VN[idx], n0)``
+    (whose two-lane vector loop adds three products as the first and third, then the
+    second; tests/test_band_fit_chunks.py compares the two) and of
+    ``np.einsum("km,kmj->kj", valid, VN[idx])`` (first to last).
     """
+    r = stop - start
+    valid = np.zeros((r, M), dtype=np.bool_)
+    pulled = np.zeros((r, 3))
+    for i in range(r):
+        q = curve[start + i]
+        a0, a1, a2 = VN[q, 0], VN[q, 1], VN[q, 2]
+        s0 = s1 = s2 = 0.0
+        o = offsets[start + i]
+        for m in range(counts[start + i]):
+            h = hits[o + m]
+            if h == q:
+                continue
+            b0, b1, b2 = VN[h, 0], VN[h, 1], VN[h, 2]
+            if 0.0 + ((b0 * a0 + b2 * a2) + b1 * a1) > _SAME_SHEET_COS:
+                valid[i, m] = True
+                s0 += b0
+                s1 += b1
+                s2 += b2
+        pulled[i, 0], pulled[i, 1], pulled[i, 2] = s0, s1, s2
+    return valid, pulled
+
+
+def _padded_rows(hits, offsets, counts, sl: slice, M: int) -> np.ndarray:
+    """Band vertices of the curve vertices ``sl``, shape (r, M) int64: each row's band
+    vertices (``hits[offsets[i]:offsets[i + 1]]``), then zeros."""
     idx = np.zeros((sl.stop - sl.start, M), dtype=np.int64)
-    valid = np.arange(M)[None, :] < counts[sl, None]
-    idx[valid] = hits[offsets[sl.start] : offsets[sl.stop]]
-    valid &= idx != curve[sl, None]
-    VNb = VN[idx]
-    # on the same sheet of the surface as the curve vertex
-    valid &= np.einsum("kmj,kj->km", VNb, VN[curve[sl]]) > _SAME_SHEET_COS
-    return idx, valid, VNb
+    idx[np.arange(M)[None, :] < counts[sl, None]] = hits[offsets[sl.start] : offsets[sl.stop]]
+    return idx
 
 
-def _chunk_fit(V, idx, valid, D, curve, T, g0, n0, band: float, along: float):
+def _chunk_fit(V, idx, valid, A, curve, T, g0, n0, band: float, along: float):
     """The fit at ``r`` curve vertices from their padded band vertices.
 
     Parameters
     ----------
     V : ndarray, shape (n, 3)
-    idx, valid : ndarray, shape (r, M)
+    idx : ndarray of int64, shape (r, M)
+        From :func:`_padded_rows`.
+    valid : ndarray of bool, shape (r, M)
         From :func:`_band_rows`.
-    D : ndarray, shape (r, M, 3)
-        Band vertices less their curve vertex.
+    A : ndarray, shape (r, 3)
+        The curve vertices' positions.
     curve : ndarray of int64, shape (r,)
     T, g0, n0 : ndarray, shape (r, 3)
         Tangent, rough direction into the surface and band normal.
@@ -494,24 +541,12 @@ def _chunk_fit(V, idx, valid, D, curve, T, g0, n0, band: float, along: float):
     slope_error : ndarray, shape (r,)
     """
     r, M = idx.shape
-    u = np.einsum("kmj,kj->km", D, T) / band
-    v = np.einsum("kmj,kj->km", D, g0) / band
     # an ellipsoid: ``along`` wide in the curve's direction, ``band`` across it and
     # off the surface, so the bend of a tube around its end stays out of the fit
-    ua = u * (band / along)
-    r2 = ua * ua + v * v + (np.einsum("kmj,kj->km", D, n0) / band) ** 2
-    valid = valid & (r2 <= 1.0)
-    w = np.where(valid, (1.0 - r2) ** 2 + 1e-3, 0.0)
-    used = valid.sum(axis=1)
-    X = _columns(u, v, used)
+    X, w, valid, used = _ellipsoid(V, idx, valid, A, T, g0, n0, band, band / along)
     Z = _fit_rows(X, w)
     beta = Z[:, 1, :] / band
-    rows = np.repeat(np.arange(r), M)
-    data = np.concatenate([beta.reshape(-1), -beta.sum(axis=1)])
-    cols = np.concatenate([idx.reshape(-1), curve])
-    rows = np.concatenate([rows, np.arange(r)])
-    keep = data != 0
-    W = sp.csr_matrix((data[keep], (rows[keep], cols[keep])), shape=(r, len(V)))
+    W = sp.csr_matrix(_weight_rows(beta, idx, curve, -beta.sum(axis=1)), shape=(r, len(V)))
     c = W @ V
     inward = unit(c - np.einsum("ij,ij->i", c, T)[:, None] * T)
     # where the band is empty keep the rough frame
@@ -519,7 +554,8 @@ def _chunk_fit(V, idx, valid, D, curve, T, g0, n0, band: float, along: float):
     inward[empty] = g0[empty]
     normal = unit(np.cross(inward, T))
     normal[np.einsum("ij,ij->i", normal, n0) < 0] *= -1.0
-    return W, used, inward, normal, _slope_error(Z, X, D, normal, band, used)
+    z, present = _slope_inputs(V, idx, A, normal, Z)
+    return W, used, inward, normal, _slope_error(Z, X, z, present, band, used)
 
 
 def _rows_of(chunks: list, empty_shape: tuple, dtype=np.float64) -> np.ndarray:
@@ -527,7 +563,7 @@ def _rows_of(chunks: list, empty_shape: tuple, dtype=np.float64) -> np.ndarray:
     return np.concatenate(chunks) if chunks else np.zeros(empty_shape, dtype=dtype)
 
 
-def _slope_error(Z, X, D, normal, band: float, used: np.ndarray) -> np.ndarray:
+def _slope_error(Z, X, z, present, band: float, used: np.ndarray) -> np.ndarray:
     """Standard error of the fitted slope off the curve, from the fit's own residuals.
 
     The heights ``z_j`` of the band vertices over the fitted tangent plane are
@@ -535,11 +571,10 @@ def _slope_error(Z, X, D, normal, band: float, used: np.ndarray) -> np.ndarray:
     degree of freedom) and the fit's row ``Z_v`` give ``se = σ ‖Z_v‖ / band``
     (unit-free: radians for small angles). Noise of a scan, or a surface the
     quadratic does not follow, raises it; a clean smooth surface has ``se ≈ 0``.
+    ``z`` (k, M) and ``present`` (k, M) from :func:`_slope_inputs`.
     """
-    z = np.einsum("kmj,kj->km", D, normal)
     coef = np.einsum("kim,km->ki", Z, z)
     fitted = np.einsum("kmi,ki->km", X, coef)
-    present = np.abs(Z).sum(axis=1) > 0
     r = np.where(present, z - fitted, 0.0)
     dof = used - _parameters(used)
     sigma2 = (r * r).sum(axis=1) / np.maximum(dof, 1)
@@ -681,3 +716,122 @@ def _scatter_columns(Zc: np.ndarray, where: np.ndarray, M: int) -> np.ndarray:
             for i in range(p):
                 Z[r, i, m] = Zc[r, i, c]
     return Z
+
+
+@nb.njit(cache=True)
+def _weight_rows(beta: np.ndarray, idx: np.ndarray, curve: np.ndarray, at_curve: np.ndarray):
+    """The fit's rows as CSR arrays ``(data, indices, indptr)``, each row's columns sorted.
+
+    Row ``i`` holds ``beta[i, m]`` (r, M) at column ``idx[i, m]`` (ascending along the
+    row wherever ``beta`` is not 0: the band vertices in their sorted order) and
+    ``at_curve[i]`` (r,) at ``curve[i]`` (r,), none of them 0 (a NaN is kept): the
+    canonical matrix scipy makes of the same entries as coordinates (sorted, and no
+    column twice, since a curve vertex has no weight in its own band), without its sort.
+    """
+    r, M = beta.shape
+    indptr = np.zeros(r + 1, dtype=np.int64)
+    for i in range(r):
+        c = 0 if at_curve[i] == 0.0 else 1
+        for m in range(M):
+            if beta[i, m] != 0.0:
+                c += 1
+        indptr[i + 1] = indptr[i] + c
+    indices = np.empty(indptr[r], dtype=np.int64)
+    data = np.empty(indptr[r])
+    for i in range(r):
+        p, q, placed = indptr[i], curve[i], at_curve[i] == 0.0
+        for m in range(M):
+            b = beta[i, m]
+            if b == 0.0:
+                continue
+            if not placed and q < idx[i, m]:
+                indices[p], data[p] = q, at_curve[i]
+                p += 1
+                placed = True
+            indices[p], data[p] = idx[i, m], b
+            p += 1
+        if not placed:
+            indices[p], data[p] = q, at_curve[i]
+    return data, indices, indptr
+
+
+@nb.njit(cache=True)
+def _nonzero_columns(Z: np.ndarray) -> np.ndarray:
+    """Where a column of ``Z`` (k, p, M) holds a non-zero and no NaN, shape (k, M).
+
+    ``np.abs(Z).sum(axis=1) > 0`` without its two (k, p, M) and (k, M) temporaries (a
+    sum of magnitudes is positive exactly where one is, in any order, and NaN where one
+    is NaN).
+    """
+    k, p, M = Z.shape
+    out = np.empty((k, M), dtype=np.bool_)
+    s = np.empty(M)
+    for r in range(k):
+        s[:] = 0.0
+        for i in range(p):
+            for m in range(M):
+                s[m] += abs(Z[r, i, m])
+        for m in range(M):
+            out[r, m] = s[m] > 0.0
+    return out
+
+
+@nb.njit(cache=True)
+def _ellipsoid(V, idx, valid, A, T, g0, n0, band: float, stretch: float):
+    """Design columns and weights of the band vertices ``idx`` (r, M) of curve points ``A``.
+
+    With ``D = V[idx] - A[:, None]``: ``u = D·T / band`` and ``v = D·g0 / band`` (r, M),
+    the squared radius ``r2 = (u stretch)² + v² + (D·n0 / band)²`` of the ellipsoid,
+    ``valid`` (r, M) narrowed to ``r2 <= 1`` (``inside``), the weights
+    ``(1 - r2)² + 1e-3`` there (0 elsewhere), the vertices ``used`` (r,) inside, and
+    the columns ``X = _columns(u, v, used)`` (r, M, 8). Returns ``X, w, inside, used``.
+    Compiled, without the (r, M, 3) differences: the floats of the array expressions,
+    each dot product as ``np.einsum("kmj,kj->km")`` adds its three products (the first
+    and third, then the second).
+    """
+    r, M = idx.shape
+    u = np.empty((r, M))
+    v = np.empty((r, M))
+    w = np.empty((r, M))
+    inside = np.empty((r, M), dtype=np.bool_)
+    used = np.zeros(r, dtype=np.int64)
+    for i in range(r):
+        t0, t1, t2 = T[i, 0], T[i, 1], T[i, 2]
+        g_0, g_1, g_2 = g0[i, 0], g0[i, 1], g0[i, 2]
+        n_0, n_1, n_2 = n0[i, 0], n0[i, 1], n0[i, 2]
+        for m in range(M):
+            h = idx[i, m]
+            d0, d1, d2 = V[h, 0] - A[i, 0], V[h, 1] - A[i, 1], V[h, 2] - A[i, 2]
+            a = (0.0 + ((d0 * t0 + d2 * t2) + d1 * t1)) / band
+            b = (0.0 + ((d0 * g_0 + d2 * g_2) + d1 * g_1)) / band
+            c = (0.0 + ((d0 * n_0 + d2 * n_2) + d1 * n_1)) / band
+            a_s = a * stretch
+            r2 = (a_s * a_s + b * b) + c * c
+            ok = valid[i, m] and r2 <= 1.0
+            u[i, m], v[i, m], inside[i, m] = a, b, ok
+            w[i, m] = (1.0 - r2) * (1.0 - r2) + 1e-3 if ok else 0.0
+            used[i] += ok
+    return _columns(u, v, used), w, inside, used
+
+
+@nb.njit(cache=True)
+def _slope_inputs(V, idx, A, normal, Z):
+    """:func:`_heights` and :func:`_nonzero_columns` in one compiled call (a process loads
+    each compiled function it calls from Python once, a few milliseconds apiece)."""
+    return _heights(V, idx, A, normal), _nonzero_columns(Z)
+
+
+@nb.njit(cache=True)
+def _heights(V, idx, A, normal):
+    """Heights ``(V[idx] - A[:, None])·normal`` (r, M) of the band vertices ``idx`` (r, M)
+    over the tangent planes at ``A`` (r, 3) of normal ``normal`` (r, 3): the floats of
+    ``np.einsum("kmj,kj->km")`` (see :func:`_ellipsoid`), without the differences."""
+    r, M = idx.shape
+    z = np.empty((r, M))
+    for i in range(r):
+        n_0, n_1, n_2 = normal[i, 0], normal[i, 1], normal[i, 2]
+        for m in range(M):
+            h = idx[i, m]
+            d0, d1, d2 = V[h, 0] - A[i, 0], V[h, 1] - A[i, 1], V[h, 2] - A[i, 2]
+            z[i, m] = 0.0 + ((d0 * n_0 + d2 * n_2) + d1 * n_1)
+    return z

@@ -22,7 +22,8 @@ def _whole_curve_fit(V, F, curve, closed, band, *, curve_points=None):
     """The band fit as one pass over the whole curve: (k, M) work arrays, no chunks.
 
     The code the chunked fit replaced (less its size guard), kept as the reference
-    its floats are compared with.
+    its floats are compared with: numpy's array expressions where the fit now has
+    compiled loops (the sheet test, the ellipsoid, the heights, the rows' placing).
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
@@ -89,8 +90,22 @@ def _whole_curve_fit(V, F, curve, closed, band, *, curve_points=None):
         frames=SeamFrames(normal=normal, tangent=T, inward=inward),
         band=band,
         counts=used,
-        slope_error=bandfit._slope_error(Z, X, D, normal, band, used),
+        slope_error=_slope_error(Z, X, D, normal, band, used),
     )
+
+
+def _slope_error(Z, X, D, normal, band, used):
+    """The slope error as array expressions over the (k, M, 3) differences ``D`` (the code
+    the compiled heights and the weighted columns' mark replaced)."""
+    z = np.einsum("kmj,kj->km", D, normal)
+    coef = np.einsum("kim,km->ki", Z, z)
+    fitted = np.einsum("kmi,ki->km", X, coef)
+    present = np.abs(Z).sum(axis=1) > 0
+    r = np.where(present, z - fitted, 0.0)
+    dof = used - bandfit._parameters(used)
+    sigma2 = (r * r).sum(axis=1) / np.maximum(dof, 1)
+    se = np.sqrt(sigma2 * (Z[:, 1, :] ** 2).sum(axis=1)) / band
+    return np.where(dof > 0, se, 0.0)
 
 
 def _padded_fit_rows(X, w):
@@ -101,10 +116,13 @@ def _padded_fit_rows(X, w):
 
 
 def _assert_same(a, b):
-    """Bit-for-bit equality of two arrays (same shape and dtype; NaN equals NaN)."""
+    """Bit-for-bit equality of two arrays (same shape and dtype; NaN equals NaN; the sign
+    of a zero counts)."""
     a, b = np.asarray(a), np.asarray(b)
     assert a.shape == b.shape and a.dtype == b.dtype
     assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f")
+    if a.dtype.kind == "f":
+        assert np.array_equal(np.signbit(a)[~np.isnan(a)], np.signbit(b)[~np.isnan(b)])
 
 
 def _assert_same_fit(a, b):
@@ -158,10 +176,11 @@ def test_the_chunked_fit_is_the_whole_curve_fit_to_the_bit(fit_cases, rows, monk
 
 
 def test_a_curve_counted_before_its_query_is_fitted_to_the_bit(fit_cases, monkeypatch):
-    # a curve whose rows could exceed a chunk is counted first and queried a chunk at a
-    # time (a short one is queried once): a budget of 0 entries sends every curve that
-    # way, one row per chunk
+    # a curve whose lists could exceed WHOLE_QUERY_ENTRIES is counted first and queried
+    # a chunk at a time (a short one is queried once): budgets of 0 entries send every
+    # curve that way, one row per chunk
     monkeypatch.setattr(bandfit, "FIT_CHUNK_ENTRIES", 0)
+    monkeypatch.setattr(bandfit, "WHOLE_QUERY_ENTRIES", 0)
     for _, V, F, curve, closed, band, points in fit_cases:
         a = bandfit.band_fit(V, F, curve, closed, band, curve_points=points)
         b = _whole_curve_fit(V, F, curve, closed, band, curve_points=points)
@@ -290,6 +309,95 @@ def test_the_rows_solved_without_the_weightless_band_vertices_are_the_padded_row
     w = np.where(present, rng.uniform(1e-3, 1.0, (k, M)), 0.0)
     X = bandfit._columns(u, v, present.sum(axis=1))
     Z = bandfit._fit_rows(X, w)
-    _assert_same(Z, _padded_fit_rows(X, w))
+    # equal as numbers: a weightless column's zeros may be -0.0 in the padded solve and
+    # 0.0 in the placed rows (neither enters the fit's rows, which leave zeros out)
+    padded = _padded_fit_rows(X, w)
+    assert Z.shape == padded.shape and np.array_equal(Z, padded)
     assert (Z[np.broadcast_to(~present[:, None, :], Z.shape)] == 0).all()
     assert bool(compact) == (M >= 2)  # a single column is solved as it is
+
+
+def _coordinates_csr(beta, idx, curve, at_curve, n):
+    """The rows as scipy makes them from coordinates (what the fit did before it placed
+    them itself)."""
+    r, M = beta.shape
+    data = np.concatenate([beta.reshape(-1), at_curve])
+    cols = np.concatenate([idx.reshape(-1), curve])
+    rows = np.concatenate([np.repeat(np.arange(r), M), np.arange(r)])
+    keep = data != 0
+    return sp.csr_matrix((data[keep], (rows[keep], cols[keep])), shape=(r, n))
+
+
+def test_the_rows_placed_in_order_are_the_matrix_of_their_coordinates():
+    # rows whose curve vertex's column comes first, last, between two band vertices, and
+    # whose curve entry is 0; band weights of 0 and -0.0 (left out), NaN (kept), and a
+    # row with no band weight at all
+    rng = np.random.default_rng(3)
+    r, M, n = 40, 12, 200
+    idx = np.zeros((r, M), dtype=np.int64)
+    beta = np.zeros((r, M))
+    curve = rng.integers(0, n, r)
+    for i in range(r):
+        m = rng.integers(0, M + 1) if i else 0
+        others = np.setdiff1d(np.arange(n), [curve[i]])
+        idx[i, :m] = np.sort(rng.choice(others, m, replace=False))
+        beta[i, :m] = rng.normal(size=m)
+        beta[i, : m // 3] = 0.0
+    beta[5, 1], beta[6, 2] = -0.0, np.nan
+    curve[7], curve[8] = 0, n - 1  # before and after every band vertex
+    at_curve = -np.nansum(beta, axis=1)
+    at_curve[9] = 0.0
+    a = sp.csr_matrix(bandfit._weight_rows(beta, idx, curve, at_curve), shape=(r, n))
+    b = _coordinates_csr(beta, idx, curve, at_curve, n)
+    for name in ("data", "indices", "indptr"):
+        _assert_same(getattr(a, name), getattr(b, name))
+    assert a.has_canonical_format
+
+
+def test_the_marked_columns_are_those_of_a_positive_sum_of_magnitudes():
+    rng = np.random.default_rng(4)
+    Z = rng.normal(size=(6, 8, 30))
+    Z[:, :, ::3] = 0.0
+    Z[0, :, 1] = -0.0
+    Z[1, 4, 2] = np.nan
+    Z[2, 3, 4] = np.inf
+    Z[3, :, 5] = 0.0
+    Z[3, 7, 5] = 5e-324  # the smallest positive float
+    _assert_same(bandfit._nonzero_columns(Z), np.abs(Z).sum(axis=1) > 0)
+
+
+def test_the_compiled_local_coordinates_are_the_einsums():
+    # rows of band vertices (with padding at vertex 0) spread from well inside the band
+    # to mostly outside it, so that rows fit a plane, a quadratic and the full columns;
+    # frames and a stretch along the curve as the fit has them. Every array equal to the
+    # bit to the expressions the compiled loops replaced, the sign of a zero included
+    rng = np.random.default_rng(5)
+    r, M, band, along = 30, 50, 1.0, 0.7
+    A = rng.normal(size=(r, 3))
+    spread = np.linspace(0.2, 3.0, r)
+    V = np.concatenate([(A[:, None, :] + spread[:, None, None] * rng.normal(size=(r, 40, 3)))
+                        .reshape(-1, 3), A[:1]])  # fmt: skip
+    idx = np.zeros((r, M), dtype=np.int64)
+    idx[:, :40] = np.arange(r * 40).reshape(r, 40)
+    idx[0, 0] = len(V) - 1  # a band vertex at its curve point: differences of 0
+    T, g0, n0, normal = (unit(rng.normal(size=(r, 3))) for _ in range(4))
+    # products 0 × negative are -0.0, their sum too; numpy's einsum adds it to a 0.0
+    T[0], normal[0] = -np.abs(T[0]), -np.abs(normal[0])
+    valid = (rng.random((r, M)) < 0.9) & (np.arange(M) < 40)
+    X, w, inside, used = bandfit._ellipsoid(V, idx, valid, A, T, g0, n0, band, band / along)
+    D = V[idx] - A[:, None, :]
+    u = np.einsum("kmj,kj->km", D, T) / band
+    v = np.einsum("kmj,kj->km", D, g0) / band
+    ua = u * (band / along)
+    r2 = ua * ua + v * v + (np.einsum("kmj,kj->km", D, n0) / band) ** 2
+    inside0 = valid & (r2 <= 1.0)
+    assert set(bandfit._parameters(inside0.sum(axis=1)).tolist()) == {2, 5, 8}
+    _assert_same(inside, inside0)
+    _assert_same(used, inside0.sum(axis=1))
+    _assert_same(X, bandfit._columns(u, v, inside0.sum(axis=1)))
+    _assert_same(w, np.where(inside0, (1.0 - r2) ** 2 + 1e-3, 0.0))
+    Z = rng.normal(size=(r, 8, M))
+    Z[:, :, ::4] = 0.0
+    z, present = bandfit._slope_inputs(V, idx, A, normal, Z)
+    _assert_same(z, np.einsum("kmj,kj->km", D, normal))
+    _assert_same(present, np.abs(Z).sum(axis=1) > 0)
