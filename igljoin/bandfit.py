@@ -52,8 +52,8 @@ BAND_EDGES = 3.0
 #: made (its work arrays are chunked, :data:`FIT_CHUNK_ENTRIES`, so only its rows grow
 #: with the band). A join spends about :data:`_BYTES_PER_ENTRY` bytes per entry on
 #: them (the fit, the smooth-join term's copies, the augmented system's matrix and
-#: factor, the coarse model's share), so 1e8 entries are about 13 GB on top of the join
-#: without them (a tube's seam about half of that). A 1M-vertex tube under the paper's
+#: factor, the coarse model's share), so 1e8 entries are about 15 GB on top of the join
+#: without them (a tube's seam less than half of that). A 1M-vertex tube under the paper's
 #: host has 5.5e7. Change with ``igljoin.bandfit.MAX_FIT_ENTRIES``.
 MAX_FIT_ENTRIES = 100_000_000
 
@@ -64,9 +64,11 @@ MAX_FIT_ENTRIES = 100_000_000
 #: 113-145 bytes on the patches, where nearly every counted vertex enters the fit,
 #: 52-72 on the tubes, where about half of them lie outside the fit's ellipsoid (round
 #: the tube) and its rows hold half as many (per entry of the rows themselves about
-#: 110-150 on both). 130 is the patches' figure; 150 had come from the 1M tube before the
-#: join's memory was cut (10.5 GB then, 7.75 GB now).
-_BYTES_PER_ENTRY = 130
+#: 110-150 on both). 145, the patches' largest, so that the refusal's estimate does not
+#: understate on a mesh like the patch (measured on these two phantoms only; a tube's
+#: seam is overstated about 2x); 150 had come from the 1M tube before the join's memory
+#: was cut (10.5 GB then, 7.75 GB now).
+_BYTES_PER_ENTRY = 145
 
 #: Work-array entries (curve vertices × band vertices, padded) of one chunk of a band
 #: fit; about 210 bytes each (peak RSS of one fit of the 300k tube's seam at 2¹⁹ and 2²¹

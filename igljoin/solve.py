@@ -655,7 +655,7 @@ def _kept_apart_stiffness_bound(
     if not smallest > 0.0:
         return None
     rest = kernels.abs_row_sums(scaled_rest.indptr, scaled_rest.data).max(initial=0.0)
-    K = sp.csr_matrix(wide.K)
+    K = wide.K  # CSR, as the band term makes it
     band = kernels.gram_row_bound(K.indptr, K.indices, K.data, wide.weights, K.shape[1])
     return float(rest / smallest + band)
 
@@ -746,7 +746,9 @@ class _FloorTest:
     ``λ`` :meth:`LocalGlobalSolver.stiffness_bound`; an energy above that bound
     (every real join's, by orders) is above the floor without making it (a
     sparse product with ``Q``), and the answer is the same. The bound too is
-    made on the first question (a run asks only once its steps are small).
+    made on the first question (a run asks only once its steps are small),
+    except with the band block kept apart: then at set-up, from the matrix
+    factored there (:func:`_kept_apart_stiffness_bound`).
     """
 
     def __init__(self, solver: LocalGlobalSolver, X: np.ndarray, tolerance: float):

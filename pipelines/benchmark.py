@@ -700,17 +700,11 @@ def _floor_table(cases: list[dict]) -> list[str]:
         resolved = "—" if not r else f"{_ms(r['cold_seconds'])} / {_ms(r['warm_seconds'])}"
         lines.append(
             f"| {c['name']} | {c['iterations']} | {_ms(goal)} | {_ms(c['join_seconds'])} | "
-            f"{_ms(again)} | {resolved} | {_ms(_before_iterating(p))} | "
+            f"{_ms(again)} | {resolved} | {_ms(c['phases']['setup'] + p['factor'])} | "
             f"{_ms(p['factor'] + p['back_solve'])} | "
             f"{_ms(p['local'])} |"
         )
     return lines
-
-
-def _before_iterating(phases: dict) -> float:
-    """Seconds a join spends before its first iteration (its phases' medians)."""
-    keys = ("select", "correspond", "terms", "factor", "initial_guess")
-    return sum(phases[k] for k in keys)
 
 
 def _resolve_table(cases: list[dict]) -> list[str]:

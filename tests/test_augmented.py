@@ -145,6 +145,7 @@ def test_the_stiffness_bound_holds_without_forming_q(sample, forced, monkeypatch
 
     js = _solver(sample)
     ls = js.solver
+    assert ls.wide is not None
     made = []
     real_rest = ls._rest
     monkeypatch.setattr(ls, "_rest", lambda scaled: made.append(scaled) or real_rest(scaled))

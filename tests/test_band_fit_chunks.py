@@ -370,7 +370,10 @@ def test_the_compiled_local_coordinates_are_the_einsums():
     # rows of band vertices (with padding at vertex 0) spread from well inside the band
     # to mostly outside it, so that rows fit a plane, a quadratic and the full columns;
     # frames and a stretch along the curve as the fit has them. Every array equal to the
-    # bit to the expressions the compiled loops replaced, the sign of a zero included
+    # bit to the expressions the compiled loops replaced, the sign of a zero included.
+    # The loops add a dot product's three terms in the order numpy's einsum does on this
+    # numpy (first and third, then second): a numpy that sums otherwise fails this test
+    # by rounding only, and the loops' order is then what to change
     rng = np.random.default_rng(5)
     r, M, band, along = 30, 50, 1.0, 0.7
     A = rng.normal(size=(r, 3))
