@@ -542,17 +542,17 @@ def _chunk_fit(V, idx, valid, A, curve, T, g0, n0, band: float, along: float):
     inward, normal : ndarray, shape (r, 3)
     slope_error : ndarray, shape (r,)
     """
-    r, M = idx.shape
+    r = len(idx)
     # an ellipsoid: ``along`` wide in the curve's direction, ``band`` across it and
     # off the surface, so the bend of a tube around its end stays out of the fit
-    X, w, valid, used = _ellipsoid(V, idx, valid, A, T, g0, n0, band, band / along)
+    X, w, _, used = _ellipsoid(V, idx, valid, A, T, g0, n0, band, band / along)
     Z = _fit_rows(X, w)
     beta = Z[:, 1, :] / band
     W = sp.csr_matrix(_weight_rows(beta, idx, curve, -beta.sum(axis=1)), shape=(r, len(V)))
     c = W @ V
     inward = unit(c - np.einsum("ij,ij->i", c, T)[:, None] * T)
     # where the band is empty keep the rough frame
-    empty = ~valid.any(axis=1)
+    empty = used == 0
     inward[empty] = g0[empty]
     normal = unit(np.cross(inward, T))
     normal[np.einsum("ij,ij->i", normal, n0) < 0] *= -1.0

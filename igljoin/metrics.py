@@ -955,10 +955,9 @@ class PolylineDistance:
 
 
 class _Midpoints(NamedTuple):
-    """The segments' side of :func:`_near_segments`: midpoints, half lengths, search tree."""
+    """The segments' side of :func:`_near_segments`: the largest half length, the
+    coordinates' extent, the midpoints' search tree."""
 
-    M: np.ndarray
-    half: np.ndarray
     half_max: np.floating
     extent: float
     tree: cKDTree
@@ -972,7 +971,7 @@ def _midpoints(A: np.ndarray, AB: np.ndarray, ab2: np.ndarray) -> _Midpoints:
     M = A + 0.5 * AB
     half = 0.5 * np.sqrt(ab2)
     extent = max(float(np.abs(M).max()), float(half.max()))
-    return _Midpoints(M, half, half.max(), extent, cKDTree(M))
+    return _Midpoints(half.max(), extent, cKDTree(M))
 
 
 def _segment_distances(P, A, AB, ab2, point, seg, p) -> np.ndarray:
@@ -1033,7 +1032,7 @@ def _near_segments(
         The pairs, every point at least once.
     """
     k, p = len(A), len(P)
-    M, half, half_max, extent, tree = kept
+    half_max, extent, tree = kept
     # the `count` nearest midpoints of every point: the nearest gives the bound
     count = min(k, 8)
     dist, idx = tree.query(P, k=count)

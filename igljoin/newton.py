@@ -362,7 +362,7 @@ def factor_entries(term) -> int:
     # D factors of rows K_r ⊗ d three
     nnz *= 3 if D == 3 else 3 * D
     if isinstance(term, ShapeTerm) and term.rotation_aware:
-        return nnz + 9 * sp.csr_matrix(term.L).nnz
+        return nnz + 9 * term.L.nnz
     return nnz
 
 
@@ -396,10 +396,11 @@ def _counted_rows(term) -> sp.csr_matrix:
 
     A rotation-aware shape term's ``K`` is a stack it keeps once made (0.26 GB
     at 1M guest vertices); its blocks' patterns
-    (:func:`igljoin.terms.row_patterns`) stacked for the count couple the
-    same pairs and are let go after it.
+    (:func:`igljoin.terms.row_patterns`), each distinct one once (``−D``'s is
+    ``D``'s, the same matrix), stacked for the count couple the same pairs and
+    are let go after it.
     """
-    blocks = row_patterns(term)
+    blocks = list({id(block): block for block in row_patterns(term)}.values())
     return blocks[0] if len(blocks) == 1 else sp.csr_matrix(sp.vstack(blocks, format="csr"))
 
 

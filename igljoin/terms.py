@@ -493,7 +493,7 @@ class ShapeTerm(Term):
         """
         if not self.rotation_aware:
             return (self.K,)
-        return (sp.csr_matrix(self.L), self.D, self.D)
+        return (self.L, self.D, self.D)
 
     @property
     def K(self) -> sp.csr_matrix:

@@ -8,6 +8,7 @@ changing a message.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 from collections.abc import Callable
@@ -56,16 +57,23 @@ def _join(guest=None, host=None, hc=HC, gc=None, **kw):
     )
 
 
+@contextlib.contextmanager
+def _entry_limit_lowered(module):
+    """``module.MAX_MODEL_ENTRIES`` lowered to 1,000 for the block, restored after it."""
+    before = module.MAX_MODEL_ENTRIES
+    module.MAX_MODEL_ENTRIES = 1_000
+    try:
+        yield
+    finally:
+        module.MAX_MODEL_ENTRIES = before
+
+
 def _two_level_past_its_limit():
     """A two-level join whose model is over ``MAX_MODEL_ENTRIES``, lowered to 1,000."""
     from igljoin import twolevel
 
-    before = twolevel.MAX_MODEL_ENTRIES
-    twolevel.MAX_MODEL_ENTRIES = 1_000
-    try:
+    with _entry_limit_lowered(twolevel):
         return _join(preconditioner="two-level")
-    finally:
-        twolevel.MAX_MODEL_ENTRIES = before
 
 
 def _newton_model_past_its_limit():
@@ -74,12 +82,8 @@ def _newton_model_past_its_limit():
     from igljoin import newton
 
     solver = igljoin.JoinSolver(HOST, GUEST, HC)
-    before = newton.MAX_MODEL_ENTRIES
-    newton.MAX_MODEL_ENTRIES = 1_000
-    try:
+    with _entry_limit_lowered(newton):
         return newton.NewtonModel(solver.solver)
-    finally:
-        newton.MAX_MODEL_ENTRIES = before
 
 
 def _write(tmp: Path, name: str, data: bytes) -> Path:

@@ -73,12 +73,7 @@ def _whole_curve_fit(V, F, curve, closed, band, *, curve_points=None):
     X = bandfit._columns(u, v, used)
     Z = _padded_fit_rows(X, w)
     beta = Z[:, 1, :] / band
-    rows = np.repeat(np.arange(k), M)
-    data = np.concatenate([beta.reshape(-1), -beta.sum(axis=1)])
-    cols = np.concatenate([idx.reshape(-1), curve])
-    rows = np.concatenate([rows, np.arange(k)])
-    keep = data != 0
-    W = sp.csr_matrix((data[keep], (rows[keep], cols[keep])), shape=(k, n))
+    W = _coordinates_csr(beta, idx, curve, -beta.sum(axis=1), n)
     c = W @ V
     inward = unit(c - np.einsum("ij,ij->i", c, T)[:, None] * T)
     empty = ~valid.any(axis=1)
@@ -90,22 +85,12 @@ def _whole_curve_fit(V, F, curve, closed, band, *, curve_points=None):
         frames=SeamFrames(normal=normal, tangent=T, inward=inward),
         band=band,
         counts=used,
-        slope_error=_slope_error(Z, X, D, normal, band, used),
+        # the heights and the weighted columns' mark as the array expressions the compiled
+        # loops replaced
+        slope_error=bandfit._slope_error(
+            Z, X, np.einsum("kmj,kj->km", D, normal), np.abs(Z).sum(axis=1) > 0, band, used
+        ),
     )
-
-
-def _slope_error(Z, X, D, normal, band, used):
-    """The slope error as array expressions over the (k, M, 3) differences ``D`` (the code
-    the compiled heights and the weighted columns' mark replaced)."""
-    z = np.einsum("kmj,kj->km", D, normal)
-    coef = np.einsum("kim,km->ki", Z, z)
-    fitted = np.einsum("kmi,ki->km", X, coef)
-    present = np.abs(Z).sum(axis=1) > 0
-    r = np.where(present, z - fitted, 0.0)
-    dof = used - bandfit._parameters(used)
-    sigma2 = (r * r).sum(axis=1) / np.maximum(dof, 1)
-    se = np.sqrt(sigma2 * (Z[:, 1, :] ** 2).sum(axis=1)) / band
-    return np.where(dof > 0, se, 0.0)
 
 
 def _padded_fit_rows(X, w):
@@ -278,7 +263,7 @@ def test_the_fits_memory_does_not_grow_with_curve_times_band(fit_cases, monkeypa
     # the whole curve's work arrays (a few hundred bytes per curve × band vertex, all
     # alive at once) dominate its peak; the chunked fit holds a tenth of them at a time,
     # plus what both share (the mesh's normals, the tree, the rows themselves). Measured
-    # 31.1 MB against 2.9 MB (10.8x) on this 9,800-vertex guest (230 seam vertices);
+    # 31.2 MB against 2.3 MB (13.5x) on this 9,800-vertex guest (230 seam vertices);
     # 5x leaves room for allocator and library changes, while a fit whose work arrays
     # grew with the whole curve again would come out near 1x
     assert whole > 5 * chunked
