@@ -865,7 +865,8 @@ def abs_row_sums(ptr, val):  # pragma: no cover - compiled
     """Every row's ``Σ_k |A_ik|`` of a CSR matrix (its ``indptr``, ``data``), shape (n,).
 
     The stored entries in their order (duplicates apart), without the ``(nnz,)``
-    temporaries of ``np.bincount`` over ``np.abs(data)``, whose sums it equals.
+    temporaries of ``np.bincount`` over ``np.abs(data)``, whose sums it equals
+    (for a matrix of a 1M-vertex guest, made at its set-up).
     """
     n = ptr.shape[0] - 1
     out = np.zeros(n)
@@ -886,12 +887,10 @@ def gram_row_bound(ptr, idx, val, weights, n):  # pragma: no cover - compiled
     at most ``Σ_i |w_i| |K_ij| Σ_l |K_il|``; so the largest is a bound of its
     largest eigenvalue (Gershgorin) without forming the product.
     """
+    rows = abs_row_sums(ptr, val)
     col = np.zeros(n)
     for i in range(ptr.shape[0] - 1):
-        r = 0.0
-        for k in range(ptr[i], ptr[i + 1]):
-            r += abs(val[k])
-        a = abs(weights[i]) * r
+        a = abs(weights[i]) * rows[i]
         for k in range(ptr[i], ptr[i + 1]):
             col[idx[k]] += a * abs(val[k])
     m = 0.0

@@ -228,7 +228,8 @@ class JoinOptions:
         ``tolerance``): converged when the energy fell by less than
         ``energy_tolerance`` times its value over the last five iterations,
         or the fall still to come at the slowest rate of the last three
-        iterations is below half that, and the last iteration moved no
+        iterations (from the fourth on, each step taken whole; docs/method.md)
+        is below half that, and the last iteration moved no
         vertex by more than ``sqrt(energy_tolerance)`` mean edge lengths
         (or the energy is below
         ``energy_tolerance²`` of its scale, a minimum of zero energy). The

@@ -183,6 +183,9 @@ class LocalGlobalSolver:
         self.wide = _wide_term(terms, linear_solver)
         self._Q = self._P = None
         self._stiffness_bound: float | None = None
+        # with the band block kept apart: the other terms' part of that bound, from P's
+        # rest at set-up (None where the scales allow none)
+        self._rest_bound: float | None = None
         if self.wide is None:
             same = all(term.preconditioner_scale == 1.0 for term in terms)
             self._Q, P = _summed(terms, n, scaled=not same)
@@ -196,7 +199,7 @@ class LocalGlobalSolver:
             # where it is used (_rest)
             w = self.wide
             scaled_rest = self._rest(scaled=True)
-            self._stiffness_bound = _kept_apart_stiffness_bound(terms, w, scaled_rest)
+            self._rest_bound = _rest_stiffness_bound(terms, w, scaled_rest)
             self.factor = AugmentedQuadratic(
                 scaled_rest, w.K, w.weights, w.preconditioner_scale, self.fixed
             )
@@ -292,19 +295,28 @@ class LocalGlobalSolver:
         return out[:, 0]
 
     def stiffness_bound(self) -> float | None:
-        """An upper bound of ``Q``'s largest eigenvalue, made once.
+        """An upper bound of ``Q``'s largest eigenvalue, made once (on first use).
 
-        ``Q``'s largest absolute row sum; with the band block kept apart, made
-        at set-up without forming ``Q`` (:func:`_kept_apart_stiffness_bound`),
-        ``None`` if the preconditioner's scales do not allow it.
+        ``Q``'s largest absolute row sum. With the band block kept apart, without
+        forming ``Q = Q_rest + Kᵀ W K``: the other terms' part made at set-up
+        (:func:`_rest_stiffness_bound`) plus a bound of the band rows' block's
+        (Weyl), the largest of its rows' absolute sums bounded from ``K``
+        (:func:`igljoin.kernels.gram_row_bound`, Gershgorin); ``None`` if the
+        preconditioner's scales do not allow the first.
         """
         if self._stiffness_bound is None and self.wide is None:
             # read from the stored entries (duplicates counted apart: a larger bound, still
             # one); scipy's abs() would sort Q's indices in place, and with them the
             # order its products sum in
             Q = self.Q
-            sums = kernels.abs_row_sums(Q.indptr, Q.data)
+            rows = np.repeat(np.arange(Q.shape[0]), np.diff(Q.indptr))
+            sums = np.bincount(rows, weights=np.abs(Q.data), minlength=Q.shape[0])
             self._stiffness_bound = float(sums.max(initial=0.0))
+        elif self._stiffness_bound is None and self._rest_bound is not None:
+            w = self.wide
+            K = w.K  # CSR, as the band term makes it
+            band = kernels.gram_row_bound(K.indptr, K.indices, K.data, w.weights, K.shape[1])
+            self._stiffness_bound = self._rest_bound + float(band)
         return self._stiffness_bound
 
     def energy_floor(self, X: np.ndarray, tolerance: float) -> float:
@@ -561,8 +573,10 @@ def _remaining_decrease(energy: list) -> float:
     With ``δ`` the last :data:`_RATE_DECREASES` decreases of ``energy`` (each
     positive) and ``ρ`` the largest ratio of one to the one before, a run that
     went on at that rate would lower the energy by ``δ_last ρ / (1 − ρ)`` more
-    (a geometric tail). Infinite before the fourth iteration, and while a
-    decrease is not positive or the decreases do not shrink (``ρ ≥ 1``).
+    (a geometric tail). Infinite before the fourth iteration (so the first
+    decrease, the start's own drop, never counts: a warm start's is large),
+    and while a decrease is not positive or the decreases do not shrink
+    (``ρ ≥ 1``).
 
     Parameters
     ----------
@@ -623,25 +637,25 @@ def _summed(
     return (sp.csr_matrix(Q) if plain else None), (sp.csr_matrix(P) if scaled else None)
 
 
-def _kept_apart_stiffness_bound(
+def _rest_stiffness_bound(
     terms: list[Term], wide: Term, scaled_rest: sp.csr_matrix
 ) -> float | None:
-    """An upper bound of ``Q``'s largest eigenvalue with ``wide``'s block kept apart.
+    """An upper bound of the largest eigenvalue of the terms' sum other than ``wide``'s.
 
-    ``Q = Q_rest + Kᵀ W K``: ``Q_rest``, the other terms' sum of positive
-    semidefinite blocks, is below their scaled sum ``P_rest`` (``scaled_rest``)
-    divided by the smallest scale ``c_t``, so its largest eigenvalue is at most
-    ``P_rest``'s largest absolute row sum over ``c_t``; ``Kᵀ W K``'s at most its
-    rows' bound (:func:`igljoin.kernels.gram_row_bound`). Their sum bounds
-    ``Q``'s (Weyl), without forming either block: the energy floor's test then
-    rarely makes ``Q_rest`` again (0.12 s a run of a 100k-vertex guest).
+    ``Q_rest = Σ K_tᵀ W_t K_t``, a sum of positive semidefinite blocks, is
+    below their scaled sum ``P_rest`` (``scaled_rest``) divided by the smallest
+    scale ``c_t``, so its largest eigenvalue is at most ``P_rest``'s largest
+    absolute row sum over ``c_t``: read at set-up from the matrix factored
+    there, so that the energy floor's test rarely makes ``Q_rest`` again
+    (0.12 s a run of a 100k-vertex guest; see
+    :meth:`LocalGlobalSolver.stiffness_bound`).
 
     Parameters
     ----------
     terms : list of Term
         The join's terms, ``wide`` among them.
     wide : Term
-        The term kept apart (its ``K``, ``weights``).
+        The term kept apart.
     scaled_rest : scipy.sparse.csr_matrix, shape (n, n)
         ``Σ c_t K_tᵀ W_t K_t`` over the other terms.
 
@@ -650,14 +664,12 @@ def _kept_apart_stiffness_bound(
     float or None
         ``None`` where a scale is not positive (no such bound).
     """
-    scales = [t.preconditioner_scale for t in terms if t is not wide]
-    smallest = min(scales, default=1.0)
+    smallest = min((t.preconditioner_scale for t in terms if t is not wide), default=1.0)
     if not smallest > 0.0:
         return None
+    # compiled: no (nnz,) temporaries at the set-up of a 1M-vertex guest
     rest = kernels.abs_row_sums(scaled_rest.indptr, scaled_rest.data).max(initial=0.0)
-    K = wide.K  # CSR, as the band term makes it
-    band = kernels.gram_row_bound(K.indptr, K.indices, K.data, wide.weights, K.shape[1])
-    return float(rest / smallest + band)
+    return float(rest / smallest)
 
 
 def _wide_term(terms: list[Term], linear_solver: str) -> Term | None:
@@ -746,9 +758,9 @@ class _FloorTest:
     ``λ`` :meth:`LocalGlobalSolver.stiffness_bound`; an energy above that bound
     (every real join's, by orders) is above the floor without making it (a
     sparse product with ``Q``), and the answer is the same. The bound too is
-    made on the first question (a run asks only once its steps are small),
-    except with the band block kept apart: then at set-up, from the matrix
-    factored there (:func:`_kept_apart_stiffness_bound`).
+    made on the first question (a run asks only once its steps are small);
+    with the band block kept apart its other terms' part is made at set-up,
+    from the matrix factored there (:func:`_rest_stiffness_bound`).
     """
 
     def __init__(self, solver: LocalGlobalSolver, X: np.ndarray, tolerance: float):

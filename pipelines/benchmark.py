@@ -685,8 +685,8 @@ def _floor_table(cases: list[dict]) -> list[str]:
         "",
         "*factor + back-solves*: the factorization and the back-substitutions at our "
         "iteration count, the part of the join that a faster local step cannot remove "
-        "(docs/limits.md, *Speed*). *before the first iteration*: validation, curve "
-        "selection, correspondence, terms, factorization and initial guess.",
+        "(docs/limits.md, *Speed*). *before the first iteration*: *setup* (above) plus the "
+        "factorization.",
         "",
         "| case | iterations | join goal (ms) | join (ms) | re-solve goal (ms) "
         "| re-solve cold / warm (ms) | before the first iteration (ms) "

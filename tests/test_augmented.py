@@ -137,8 +137,9 @@ def test_rows_of_zero_weight_are_left_out():
 
 
 def test_the_stiffness_bound_holds_without_forming_q(sample, forced, monkeypatch):
-    """With the band block apart the floor's bound is made at set-up, and a join whose
-    energy stays above it never sums the other terms again for the floor."""
+    """With the band block apart the floor's bound is made from the sum set-up factored and
+    the band rows, and a join whose energy stays above it never sums the other terms
+    again for the floor."""
     from scipy.sparse.linalg import eigsh
 
     from igljoin.solve import _FloorTest
@@ -146,6 +147,8 @@ def test_the_stiffness_bound_holds_without_forming_q(sample, forced, monkeypatch
     js = _solver(sample)
     ls = js.solver
     assert ls.wide is not None
+    # the other terms' part at set-up, the band rows' part only once asked
+    assert ls._rest_bound is not None and ls._stiffness_bound is None
     made = []
     real_rest = ls._rest
     monkeypatch.setattr(ls, "_rest", lambda scaled: made.append(scaled) or real_rest(scaled))

@@ -71,14 +71,23 @@ def test_term_blocks_are_let_go_before_the_augmented_factorization(sample, monke
     assert alive == [0]
 
 
+def _listed_sums(terms, n: int) -> tuple:
+    """``Σ K_tᵀ W_t K_t`` and ``Σ c_t K_tᵀ W_t K_t`` as sums of a list of blocks (what the
+    solver made before it summed them as made)."""
+    blocks = [t.quadratic() for t in terms]
+    scaled = [t.preconditioner_scale * q for t, q in zip(terms, blocks)]
+    return (
+        sp.csr_matrix(sum(blocks, sp.csr_matrix((n, n)))),
+        sp.csr_matrix(sum(scaled, sp.csr_matrix((n, n)))),
+    )
+
+
 def test_summed_blocks_are_the_sums_of_their_list(sample):
     ls = _solver(sample)
-    n, zero = ls.n, sp.csr_matrix((ls.n, ls.n))
-    blocks = [t.quadratic() for t in ls.terms]
+    Q, P = _listed_sums(ls.terms, ls.n)
     assert ls.P is not ls.Q  # the stretch and smooth terms' scales are below 1
-    assert _same(ls.Q, sp.csr_matrix(sum(blocks, zero)))
-    scaled = [t.preconditioner_scale * q for t, q in zip(ls.terms, blocks)]
-    assert _same(ls.P, sp.csr_matrix(sum(scaled, sp.csr_matrix((n, n)))))
+    assert _same(ls.Q, Q)
+    assert _same(ls.P, P)
 
 
 @needs_pardiso
@@ -100,12 +109,7 @@ def test_the_other_terms_sums_are_made_where_used(sample, monkeypatch):
     assert not [k for k, v in vars(ls).items() if isinstance(v, sp.spmatrix)]
     # what is made from them later is what the sums kept would have made, to the bit
     wide = ls.wide
-    others = [t for t in ls.terms if t is not wide]
-    blocks = [t.quadratic() for t in others]
-    n = ls.n
-    rest_q = sp.csr_matrix(sum(blocks, sp.csr_matrix((n, n))))
-    scaled = [t.preconditioner_scale * q for t, q in zip(others, blocks)]
-    rest_p = sp.csr_matrix(sum(scaled, sp.csr_matrix((n, n))))
+    rest_q, rest_p = _listed_sums([t for t in ls.terms if t is not wide], ls.n)
     assert _same(ls.Q, sp.csr_matrix(rest_q + wide.quadratic()))
     assert _same(ls.P, sp.csr_matrix(rest_p + wide.preconditioner_scale * wide.quadratic()))
     X = js.solve().guest.V
